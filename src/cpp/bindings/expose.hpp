@@ -1,0 +1,9 @@
+// One expose function per area, all registered by module.cpp.
+#pragma once
+
+namespace stiction {
+namespace python {
+void exposeProblem();
+void exposeSolver();
+}  // namespace python
+}  // namespace stiction

@@ -1,0 +1,110 @@
+#include <boost/python.hpp>
+#include <eigenpy/eigenpy.hpp>
+
+#include "expose.hpp"
+#include "stiction/contact_problem.hpp"
+
+namespace bp = boost::python;
+
+namespace stiction {
+namespace python {
+
+namespace {
+
+std::vector<Constraint> toConstraints(const bp::object& seq) {
+  std::vector<Constraint> out;
+  const long n = bp::len(seq);
+  out.reserve(n);
+  for (long i = 0; i < n; ++i) {
+    bp::extract<Constraint> c(seq[i]);
+    if (!c.check())
+      throw std::invalid_argument("ContactProblem: constraints[" + std::to_string(i) +
+                                  "] is not a stiction.Constraint");
+    out.push_back(c());
+  }
+  return out;
+}
+
+std::shared_ptr<ContactProblem> makeProblem(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
+                                            const bp::object& constraints, double asymmetry_tolerance) {
+  return std::make_shared<ContactProblem>(std::make_shared<DenseDelassus>(A), b,
+                                          toConstraints(constraints), asymmetry_tolerance);
+}
+
+bp::list constraintsOf(const ContactProblem& p) {
+  bp::list out;
+  for (const Constraint& c : p.constraints()) out.append(c);
+  return out;
+}
+
+bp::list offsetsOf(const ContactProblem& p) {
+  bp::list out;
+  for (auto o : p.offsets()) out.append(static_cast<long>(o));
+  return out;
+}
+
+Eigen::MatrixXd denseA(const ContactProblem& p) { return p.delassus().dense(); }
+Eigen::VectorXd bOf(const ContactProblem& p) { return p.b(); }
+void setB(ContactProblem& p, const Eigen::VectorXd& b) { p.setB(b); }
+
+std::string constraintRepr(const Constraint& c) { return "stiction.Constraint." + c.describe(); }
+bool constraintEq(const Constraint& a, const Constraint& b) {
+  return a.kind == b.kind && a.size == b.size && a.mu == b.mu;
+}
+
+}  // namespace
+
+void exposeProblem() {
+  bp::enum_<ConstraintKind>("ConstraintKind")
+      .value("bilateral", ConstraintKind::kBilateral)
+      .value("unilateral", ConstraintKind::kUnilateral)
+      .value("planar_friction", ConstraintKind::kPlanarFriction)
+      .value("spatial_friction", ConstraintKind::kSpatialFriction);
+  bp::enum_<ContactState>("ContactState")
+      .value("open", ContactState::kOpen)
+      .value("stick", ContactState::kStick)
+      .value("slip", ContactState::kSlip)
+      .value("closed", ContactState::kClosed);
+
+  bp::class_<Constraint>("Constraint",
+                         "One block of rows. Build with Constraint.bilateral(k), "
+                         "Constraint.unilateral(), Constraint.planar_friction(mu), "
+                         "Constraint.spatial_friction(mu). Normal row last.",
+                         bp::no_init)
+      .def("bilateral", &Constraint::bilateral, bp::arg("rows"), "k equality rows (C = R^k)")
+      .staticmethod("bilateral")
+      .def("unilateral", &Constraint::unilateral, "1 row, lambda_n >= 0")
+      .staticmethod("unilateral")
+      .def("planar_friction", &Constraint::planarFriction, bp::arg("mu"),
+           "2 rows (t, n), |lambda_t| <= mu lambda_n")
+      .staticmethod("planar_friction")
+      .def("spatial_friction", &Constraint::spatialFriction, bp::arg("mu"),
+           "3 rows (t1, t2, n), ||lambda_t|| <= mu lambda_n")
+      .staticmethod("spatial_friction")
+      .def_readonly("kind", &Constraint::kind)
+      .def_readonly("size", &Constraint::size)
+      .def_readonly("mu", &Constraint::mu)
+      .def("__repr__", &constraintRepr)
+      .def("__eq__", &constraintEq);
+
+  bp::class_<ContactProblem, std::shared_ptr<ContactProblem>>(
+      "ContactProblem",
+      "A lambda - b in -lim N_C^{U_eps}(lambda) (eq. 65): Delassus operator A, right-hand "
+      "side b, and the list of constraint blocks. Raises ValueError on inconsistent input.",
+      bp::no_init)
+      .def("__init__",
+           bp::make_constructor(&makeProblem, bp::default_call_policies(),
+                                (bp::arg("A"), bp::arg("b"), bp::arg("constraints"),
+                                 bp::arg("asymmetry_tolerance") = 1e-9)))
+      .add_property("A", &denseA, "dense copy of the Delassus operator")
+      .add_property("b", &bOf)
+      .add_property("constraints", &constraintsOf)
+      .add_property("offsets", &offsetsOf, "first row of each block, then the row count")
+      .add_property("num_rows", &ContactProblem::numRows)
+      .add_property("num_blocks", &ContactProblem::numBlocks)
+      .add_property("asymmetry", &ContactProblem::asymmetry, "max|A - A^T| / max|A|")
+      .def("set_b", &setB, bp::arg("b"), "replace b (same size), keeping A");
+}
+
+}  // namespace python
+}  // namespace stiction

@@ -1,0 +1,45 @@
+#include "stiction/constraint.hpp"
+
+#include <sstream>
+#include <stdexcept>
+
+namespace stiction {
+
+const char* toString(ConstraintKind kind) {
+  switch (kind) {
+    case ConstraintKind::kBilateral: return "bilateral";
+    case ConstraintKind::kUnilateral: return "unilateral";
+    case ConstraintKind::kPlanarFriction: return "planar_friction";
+    case ConstraintKind::kSpatialFriction: return "spatial_friction";
+  }
+  return "unknown";
+}
+
+const char* toString(ContactState state) {
+  switch (state) {
+    case ContactState::kOpen: return "open";
+    case ContactState::kStick: return "stick";
+    case ContactState::kSlip: return "slip";
+    case ContactState::kClosed: return "closed";
+  }
+  return "unknown";
+}
+
+Constraint Constraint::bilateral(int rows) {
+  if (rows < 1) throw std::invalid_argument("bilateral constraint needs at least 1 row, got " + std::to_string(rows));
+  return {ConstraintKind::kBilateral, rows, 0.0};
+}
+Constraint Constraint::unilateral() { return {ConstraintKind::kUnilateral, 1, 0.0}; }
+Constraint Constraint::planarFriction(double mu) { return {ConstraintKind::kPlanarFriction, 2, mu}; }
+Constraint Constraint::spatialFriction(double mu) { return {ConstraintKind::kSpatialFriction, 3, mu}; }
+
+std::string Constraint::describe() const {
+  std::ostringstream os;
+  os << toString(kind) << "(";
+  if (kind == ConstraintKind::kBilateral) os << "rows=" << size;
+  if (hasFriction()) os << "mu=" << mu;
+  os << ")";
+  return os.str();
+}
+
+}  // namespace stiction

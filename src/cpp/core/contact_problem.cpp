@@ -1,0 +1,71 @@
+#include "stiction/contact_problem.hpp"
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace stiction {
+
+namespace {
+std::string fmt(double x) {
+  std::ostringstream os;
+  os << x;
+  return os.str();
+}
+}  // namespace
+
+ContactProblem::ContactProblem(std::shared_ptr<const DelassusOperator> delassus, Eigen::VectorXd b,
+                               std::vector<Constraint> constraints, double asymmetry_tolerance)
+    : delassus_(std::move(delassus)), b_(std::move(b)), constraints_(std::move(constraints)) {
+  if (!delassus_) throw std::invalid_argument("ContactProblem: no Delassus operator given");
+  const Eigen::Index m = delassus_->rows();
+  if (b_.size() != m)
+    throw std::invalid_argument("ContactProblem: b has " + std::to_string(b_.size()) +
+                                " entries but A is " + std::to_string(m) + "x" + std::to_string(m));
+  offsets_.clear();
+  offsets_.reserve(constraints_.size() + 1);
+  Eigen::Index row = 0;
+  for (std::size_t i = 0; i < constraints_.size(); ++i) {
+    const Constraint& c = constraints_[i];
+    const int expected = c.kind == ConstraintKind::kUnilateral       ? 1
+                         : c.kind == ConstraintKind::kPlanarFriction ? 2
+                         : c.kind == ConstraintKind::kSpatialFriction ? 3
+                                                                      : c.size;
+    if (c.size != expected || c.size < 1)
+      throw std::invalid_argument("ContactProblem: constraint " + std::to_string(i) + " (" +
+                                  c.describe() + ") has " + std::to_string(c.size) + " rows");
+    if (c.hasFriction() && !(std::isfinite(c.mu) && c.mu >= 0.0))
+      throw std::invalid_argument("ContactProblem: constraint " + std::to_string(i) +
+                                  " has friction coefficient mu = " + fmt(c.mu) +
+                                  "; mu must be finite and >= 0");
+    offsets_.push_back(row);
+    row += c.size;
+  }
+  offsets_.push_back(row);
+  if (row != m)
+    throw std::invalid_argument("ContactProblem: the constraints have " + std::to_string(row) +
+                                " rows in all but A is " + std::to_string(m) + "x" + std::to_string(m));
+  const Eigen::MatrixXd& A = delassus_->dense();
+  if (!A.allFinite()) throw std::invalid_argument("ContactProblem: A has NaN or infinite entries");
+  if (!b_.allFinite()) throw std::invalid_argument("ContactProblem: b has NaN or infinite entries");
+  for (Eigen::Index i = 0; i < m; ++i)
+    if (!(A(i, i) >= 0.0))
+      throw std::invalid_argument("ContactProblem: A[" + std::to_string(i) + "," + std::to_string(i) +
+                                  "] = " + fmt(A(i, i)) +
+                                  " is negative; a Delassus operator is positive semi-definite");
+  asymmetry_ = delassus_->relativeAsymmetry();
+  if (asymmetry_ > asymmetry_tolerance)
+    throw std::invalid_argument("ContactProblem: A is not symmetric (max|A - A^T| / max|A| = " +
+                                fmt(asymmetry_) + " > asymmetry_tolerance = " + fmt(asymmetry_tolerance) +
+                                ")");
+}
+
+void ContactProblem::setB(const Eigen::Ref<const Eigen::VectorXd>& b) {
+  if (b.size() != b_.size())
+    throw std::invalid_argument("ContactProblem.set_b: expected " + std::to_string(b_.size()) +
+                                " entries, got " + std::to_string(b.size()));
+  if (!b.allFinite()) throw std::invalid_argument("ContactProblem.set_b: b has NaN or infinite entries");
+  b_ = b;
+}
+
+}  // namespace stiction

@@ -1,0 +1,34 @@
+#include "stiction/delassus.hpp"
+
+#include <stdexcept>
+
+namespace stiction {
+
+DenseDelassus::DenseDelassus(Eigen::MatrixXd A) : A_(std::move(A)) {
+  if (A_.rows() != A_.cols())
+    throw std::invalid_argument("Delassus matrix A must be square, got " + std::to_string(A_.rows()) +
+                                "x" + std::to_string(A_.cols()));
+}
+
+void DenseDelassus::multiply(const Eigen::Ref<const Eigen::VectorXd>& x,
+                             Eigen::Ref<Eigen::VectorXd> y) const {
+  y.noalias() = A_ * x;
+}
+
+void DenseDelassus::addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,
+                                        const Eigen::Ref<const Eigen::VectorXd>& dx,
+                                        Eigen::Ref<Eigen::VectorXd> y) const {
+  y.noalias() += A_.middleCols(offset, size) * dx;
+}
+
+Eigen::MatrixXd DenseDelassus::diagonalBlock(Eigen::Index offset, Eigen::Index size) const {
+  return A_.block(offset, offset, size, size);
+}
+
+double DenseDelassus::relativeAsymmetry() const {
+  const double scale = A_.cwiseAbs().maxCoeff();
+  if (!(scale > 0.0)) return 0.0;
+  return (A_ - A_.transpose()).cwiseAbs().maxCoeff() / scale;
+}
+
+}  // namespace stiction

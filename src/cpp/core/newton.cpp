@@ -1,0 +1,208 @@
+#include "stiction/newton.hpp"
+
+#include <chrono>
+#include <cmath>
+
+#include "stiction/cone.hpp"
+
+namespace stiction {
+
+namespace {
+
+// Jacobian of the projection onto {||x_t|| <= mu x_n} (k = 2 or 3, normal last).
+template <int K>
+Eigen::Matrix<double, K, K> coneProjectionJacobian(const Eigen::Matrix<double, K, 1>& z, double mu) {
+  using Mat = Eigen::Matrix<double, K, K>;
+  using Vt = Eigen::Matrix<double, K - 1, 1>;
+  const Vt zt = z.template head<K - 1>();
+  const double zn = z[K - 1];
+  const double rho = zt.norm();
+  if (zn >= 0.0 && rho <= mu * zn) return Mat::Identity();
+  if (mu * rho <= -zn) return Mat::Zero();
+  const double d = 1.0 + mu * mu;
+  const double a = (zn + mu * rho) / d;
+  Mat J = Mat::Zero();
+  if (!(rho > 0.0)) {  // mu = 0 corner: only the normal survives
+    J(K - 1, K - 1) = 1.0 / d;
+    return J;
+  }
+  const Vt e = zt / rho;
+  J.template topLeftCorner<K - 1, K - 1>() =
+      mu * (mu / d) * e * e.transpose() +
+      mu * a / rho * (Eigen::Matrix<double, K - 1, K - 1>::Identity() - e * e.transpose());
+  J.template topRightCorner<K - 1, 1>() = mu / d * e;
+  J.template bottomLeftCorner<1, K - 1>() = mu / d * e.transpose();
+  J(K - 1, K - 1) = 1.0 / d;
+  return J;
+}
+
+}  // namespace
+
+void NewtonSolver::evaluate(const ContactProblem& problem, const Eigen::VectorXd& lam, bool jacobian) {
+  const auto& cons = problem.constraints();
+  const auto& off = problem.offsets();
+  const Eigen::MatrixXd& A = problem.delassus().dense();
+  const Eigen::Index m = problem.numRows();
+  u_.noalias() = A * lam;
+  u_ -= problem.b();
+  F_.resize(m);
+  if (jacobian) J_.setZero(m, m);
+  for (std::size_t i = 0; i < cons.size(); ++i) {
+    const Eigen::Index o = off[i];
+    const int k = cons[i].size;
+    const double kap = kappa_[i];
+    const double mu = cons[i].mu;
+    switch (cons[i].kind) {
+      case ConstraintKind::kBilateral:
+        F_.segment(o, k) = kap * u_.segment(o, k);
+        if (jacobian) J_.middleRows(o, k) = kap * A.middleRows(o, k);
+        break;
+      case ConstraintKind::kUnilateral: {
+        const double z = lam[o] - kap * u_[o];
+        F_[o] = lam[o] - std::max(0.0, z);
+        if (jacobian) {
+          if (z > 0.0)
+            J_.row(o) = kap * A.row(o);
+          else
+            J_(o, o) = 1.0;
+        }
+        break;
+      }
+      case ConstraintKind::kPlanarFriction: {
+        const double ut = u_[o];
+        Eigen::Vector2d z = lam.segment<2>(o) - kap * u_.segment<2>(o);
+        z[1] -= kap * mu * std::abs(ut);
+        Eigen::Vector2d p = z;
+        projectPlanarCone(p, mu);
+        F_.segment<2>(o) = lam.segment<2>(o) - p;
+        if (jacobian) {
+          const Eigen::Matrix2d JP = coneProjectionJacobian<2>(z, mu);
+          const double sg = ut > 0.0 ? 1.0 : (ut < 0.0 ? -1.0 : 0.0);
+          // rows of (I + D_s) A
+          Eigen::Matrix<double, 2, Eigen::Dynamic> M = A.middleRows(o, 2);
+          M.row(1) += mu * sg * A.row(o);
+          J_.middleRows(o, 2).noalias() = kap * JP * M;
+          J_.block(o, o, 2, 2) += Eigen::Matrix2d::Identity() - JP;
+        }
+        break;
+      }
+      case ConstraintKind::kSpatialFriction: {
+        const double utn = std::hypot(u_[o], u_[o + 1]);
+        Eigen::Vector3d z = lam.segment<3>(o) - kap * u_.segment<3>(o);
+        z[2] -= kap * mu * utn;
+        Eigen::Vector3d p = z;
+        projectSpatialCone(p, mu);
+        F_.segment<3>(o) = lam.segment<3>(o) - p;
+        if (jacobian) {
+          const Eigen::Matrix3d JP = coneProjectionJacobian<3>(z, mu);
+          Eigen::Matrix<double, 3, Eigen::Dynamic> M = A.middleRows(o, 3);
+          if (utn > 0.0) M.row(2) += mu / utn * (u_[o] * A.row(o) + u_[o + 1] * A.row(o + 1));
+          J_.middleRows(o, 3).noalias() = kap * JP * M;
+          J_.block(o, o, 3, 3) += Eigen::Matrix3d::Identity() - JP;
+        }
+        break;
+      }
+    }
+  }
+}
+
+int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max_steps,
+                      double tolerance, double time_limit, std::string& message) {
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  const auto& cons = problem.constraints();
+  const auto& off = problem.offsets();
+  const Eigen::MatrixXd& A = problem.delassus().dense();
+  const Eigen::Index m = problem.numRows();
+  const double scale = 1.0 + problem.b().norm();
+  kappa_.resize(cons.size());
+  for (std::size_t i = 0; i < cons.size(); ++i) {
+    const double tr = A.diagonal().segment(off[i], cons[i].size).sum();
+    kappa_[i] = tr > 0.0 ? cons[i].size / tr : 1.0;
+  }
+  message = "iteration limit reached";
+  int step = 0;
+  evaluate(problem, lam, true);
+  double f_norm = F_.norm();
+  for (; step < max_steps; ++step) {
+    if (naturalMapNorm(problem, lam, u_) / scale <= tolerance) {
+      message = "converged";
+      break;
+    }
+    if (time_limit > 0.0 && std::chrono::duration<double>(Clock::now() - start).count() > time_limit) {
+      message = "time limit reached";
+      break;
+    }
+    // (dF + eps I) d = -F, eps ~ ||F|| relative to the size of lambda.
+    const double eps = std::min(1e-2, std::max(1e-14, f_norm / (1.0 + lam.norm())));
+    J_.diagonal().array() += eps;
+    lu_.compute(J_);
+    step_ = -lu_.solve(F_);
+    if (!step_.allFinite()) {
+      message = "singular Newton system";
+      break;
+    }
+    // Backtracking on ||F||.
+    double t = 1.0, best_norm = f_norm, best_t = 0.0;
+    trial_.resize(m);
+    for (int ls = 0; ls < 30; ++ls, t *= 0.5) {
+      trial_ = lam + t * step_;
+      evaluate(problem, trial_, false);
+      const double n = F_.norm();
+      if (n < best_norm) {
+        best_norm = n;
+        best_t = t;
+      }
+      if (n <= (1.0 - 1e-4 * t) * f_norm) break;
+    }
+    if (best_t == 0.0) {
+      message = "stalled (no descent along the Newton direction)";
+      evaluate(problem, lam, false);  // restore u_ for the caller's verdict
+      break;
+    }
+    lam += best_t * step_;
+    evaluate(problem, lam, true);
+    f_norm = F_.norm();
+  }
+  return step;
+}
+
+void NewtonSolver::iterate(const ContactProblem& problem, const SolverSettings& settings,
+                           SolverResult& result) {
+  result.iterations = run(problem, result.lam, settings.max_iterations, settings.tolerance,
+                          settings.time_limit, result.message);
+}
+
+void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings& settings,
+                            SolverResult& result) {
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  auto remaining = [&]() {
+    if (settings.time_limit <= 0.0) return 0.0;
+    return std::max(1e-9, settings.time_limit - std::chrono::duration<double>(Clock::now() - start).count());
+  };
+  Eigen::VectorXd& lam = result.lam;
+  int used = nsgs_.sweep(problem, lam, settings.max_iterations, settings.tolerance, 0.5,
+                         settings.time_limit, result.message);
+  if (result.message != "stalled") {
+    result.iterations = used;
+    return;
+  }
+  const Eigen::VectorXd from_nsgs = lam;
+  const double r_nsgs = residual(problem, lam);
+  std::string msg;
+  const int newton_steps = 100;
+  used += newton_.run(problem, lam, newton_steps, settings.tolerance, remaining(), msg);
+  if (msg == "converged") {
+    result.message = "converged (nsgs, then newton)";
+    result.iterations = used;
+    return;
+  }
+  if (residual(problem, lam) > r_nsgs) lam = from_nsgs;
+  const int left = std::max(0, settings.max_iterations - used);
+  used += nsgs_.sweep(problem, lam, left, settings.tolerance, 0.0, remaining(), msg);
+  result.message = msg == "converged" ? "converged (nsgs, newton, nsgs)" : msg;
+  result.iterations = used;
+}
+
+}  // namespace stiction

@@ -1,0 +1,180 @@
+#include "stiction/nsgs.hpp"
+
+#include <chrono>
+#include <cmath>
+
+#include <Eigen/LU>
+
+#include "stiction/cone.hpp"
+#include "stiction/local_solve.hpp"
+
+namespace stiction {
+
+namespace {
+
+// Inverse of a diagonal block; a singular block (dependent rows of one contact)
+// gets the smallest diagonal shift that makes it invertible, so the local solve
+// still returns a finite answer (the global verdict is made on the true residual).
+void invertBlock(Eigen::Map<Eigen::MatrixXd> G, Eigen::Map<Eigen::MatrixXd> G_inv) {
+  const Eigen::Index k = G.rows();
+  const double scale = std::max(G.diagonal().cwiseAbs().maxCoeff(), 1e-300);
+  Eigen::MatrixXd shifted = G;
+  for (double eps = 0.0;; eps = eps == 0.0 ? 1e-12 * scale : eps * 100.0) {
+    shifted.diagonal() = G.diagonal().array() + eps;
+    Eigen::FullPivLU<Eigen::MatrixXd> lu(shifted);
+    lu.setThreshold(1e-13);
+    if (lu.isInvertible() || eps > scale) {
+      G_inv = lu.inverse();
+      if (eps > 0.0) G.diagonal().array() += eps;  // keep G consistent with G_inv
+      return;
+    }
+  }
+  (void)k;
+}
+
+}  // namespace
+
+void NsgsSolver::prepare(const ContactProblem& problem) {
+  const auto& cons = problem.constraints();
+  packed_offsets_.resize(cons.size() + 1);
+  Eigen::Index total = 0;
+  for (std::size_t i = 0; i < cons.size(); ++i) {
+    packed_offsets_[i] = total;
+    total += static_cast<Eigen::Index>(cons[i].size) * cons[i].size;
+  }
+  packed_offsets_[cons.size()] = total;
+  blocks_.resize(total);
+  inverses_.resize(total);
+  const auto& off = problem.offsets();
+  for (std::size_t i = 0; i < cons.size(); ++i) {
+    const int k = cons[i].size;
+    Eigen::Map<Eigen::MatrixXd> G(blocks_.data() + packed_offsets_[i], k, k);
+    Eigen::Map<Eigen::MatrixXd> G_inv(inverses_.data() + packed_offsets_[i], k, k);
+    G = problem.delassus().diagonalBlock(off[i], k);
+    invertBlock(G, G_inv);
+  }
+  const Eigen::Index m = problem.numRows();
+  u_.resize(m);
+  delta_.resize(m);
+  local_.resize(m);
+}
+
+int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int max_sweeps,
+                      double tolerance, double stall_ratio, double time_limit, std::string& message) {
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  prepare(problem);
+  const auto& cons = problem.constraints();
+  const auto& off = problem.offsets();
+  const DelassusOperator& A = problem.delassus();
+  const double scale = 1.0 + problem.b().norm();
+
+  // Start from a feasible point.
+  for (std::size_t i = 0; i < cons.size(); ++i) {
+    auto li = lam.segment(off[i], cons[i].size);
+    switch (cons[i].kind) {
+      case ConstraintKind::kUnilateral: li[0] = std::max(li[0], 0.0); break;
+      case ConstraintKind::kPlanarFriction: projectPlanarCone(li, cons[i].mu); break;
+      case ConstraintKind::kSpatialFriction: projectSpatialCone(li, cons[i].mu); break;
+      case ConstraintKind::kBilateral: break;
+    }
+  }
+  A.multiply(lam, u_);
+  u_ -= problem.b();
+
+  double history[11];
+  int done = 0;
+  message = "iteration limit reached";
+  for (int it = 0; it < max_sweeps; ++it) {
+    for (std::size_t i = 0; i < cons.size(); ++i) {
+      const Eigen::Index o = off[i];
+      const int k = cons[i].size;
+      const double* Gp = blocks_.data() + packed_offsets_[i];
+      const double* Gi = inverses_.data() + packed_offsets_[i];
+      auto li = lam.segment(o, k);
+      auto ui = u_.segment(o, k);
+      bool changed = false;
+      switch (cons[i].kind) {
+        case ConstraintKind::kSpatialFriction: {
+          const Eigen::Map<const Eigen::Matrix3d> G(Gp), G_inv(Gi);
+          const Eigen::Vector3d old = li;
+          const Eigen::Vector3d c = ui - G * old;
+          Eigen::Vector3d x = old;
+          solveSpatialBlock(G, G_inv, c, cons[i].mu, x);
+          delta_.head<3>() = x - old;
+          changed = delta_.head<3>().squaredNorm() > 0.0;
+          li = x;
+          break;
+        }
+        case ConstraintKind::kPlanarFriction: {
+          const Eigen::Map<const Eigen::Matrix2d> G(Gp), G_inv(Gi);
+          const Eigen::Vector2d old = li;
+          const Eigen::Vector2d c = ui - G * old;
+          Eigen::Vector2d x = old;
+          solvePlanarBlock(G, G_inv, c, cons[i].mu, x);
+          delta_.head<2>() = x - old;
+          changed = delta_.head<2>().squaredNorm() > 0.0;
+          li = x;
+          break;
+        }
+        case ConstraintKind::kUnilateral: {
+          const double old = li[0];
+          const double c = ui[0] - Gp[0] * old;
+          const double x = Gp[0] > 0.0 ? std::max(0.0, -c / Gp[0]) : (c < 0.0 ? old : 0.0);
+          delta_[0] = x - old;
+          changed = delta_[0] != 0.0;
+          li[0] = x;
+          break;
+        }
+        case ConstraintKind::kBilateral: {
+          const Eigen::Map<const Eigen::MatrixXd> G(Gp, k, k), G_inv(Gi, k, k);
+          local_.head(k) = ui - G * li;  // c
+          delta_.head(k).noalias() = -G_inv * local_.head(k);
+          delta_.head(k) -= li;
+          changed = delta_.head(k).squaredNorm() > 0.0;
+          li += delta_.head(k);
+          break;
+        }
+      }
+      if (changed) A.addColumnBlockTimes(o, k, delta_.head(k), u_);
+    }
+    done = it + 1;
+    if (done % 50 == 0) {  // limit the drift of the incrementally updated u
+      A.multiply(lam, u_);
+      u_ -= problem.b();
+    }
+    double r = naturalMapNorm(problem, lam, u_) / scale;
+    if (r <= tolerance) {
+      A.multiply(lam, u_);
+      u_ -= problem.b();
+      r = naturalMapNorm(problem, lam, u_) / scale;
+      if (r <= tolerance) {
+        message = "converged";
+        break;
+      }
+    }
+    if (!std::isfinite(r)) {
+      message = "diverged (non-finite residual)";
+      break;
+    }
+    history[it % 11] = r;
+    if (stall_ratio > 0.0 && it >= 10 && r > stall_ratio * history[(it - 10) % 11]) {
+      message = "stalled";
+      break;
+    }
+    if (time_limit > 0.0 &&
+        std::chrono::duration<double>(Clock::now() - start).count() > time_limit) {
+      message = "time limit reached";
+      break;
+    }
+  }
+  return done;
+}
+
+void NsgsSolver::iterate(const ContactProblem& problem, const SolverSettings& settings,
+                         SolverResult& result) {
+  result.iterations = sweep(problem, result.lam, settings.max_iterations, settings.tolerance, 0.0,
+                            settings.time_limit, result.message);
+}
+
+}  // namespace stiction

@@ -1,0 +1,40 @@
+// ADMM on the cone problem with the De Saxce correction (eq. 73-77).
+//
+// For fixed s the problem is the convex cone QP  min 1/2 l'A l - (b - E s)'l,
+// l in C. ADMM splits it into a linear solve with (A + (rho + prox) I), which is
+// nonsingular even for a rank-deficient A, and a projection onto C; s is
+// refreshed from u = A z - b at every iteration, so the fixed point is the exact
+// Coulomb NCP, not the CCP relaxation (eq. 79). rho follows residual balancing.
+#pragma once
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+
+#include "stiction/solver.hpp"
+
+namespace stiction {
+
+class AdmmSolver final : public ContactSolver {
+ public:
+  std::string name() const override { return "admm"; }
+  void iterate(const ContactProblem& problem, const SolverSettings& settings,
+               SolverResult& result) override;
+
+ private:
+  void factorize(const ContactProblem& problem, double shift);
+  void solveShifted(Eigen::VectorXd& x) const;
+
+  bool symmetric_ = true;
+  Eigen::MatrixXd shifted_;
+  Eigen::LLT<Eigen::MatrixXd> llt_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
+  Eigen::VectorXd z_, z_prev_, y_, u_, rhs_;
+};
+
+/// Largest eigenvalue of the symmetric part of A by power iteration (an estimate).
+double largestEigenvalue(const ContactProblem& problem, int iterations = 30);
+
+/// In-place projection of every block of x onto its set C.
+void projectOntoConstraints(const ContactProblem& problem, Eigen::Ref<Eigen::VectorXd> x);
+
+}  // namespace stiction

@@ -1,0 +1,51 @@
+// The per-step algebraic problem of the paper:
+//
+//     A lambda - b  in  - lim_{eps -> 0} N_C^{U_eps}(lambda)        (eq. 65, 70)
+//
+// with C the product of the blocks' sets and U_eps the singular metric of eq. 59.
+// For friction blocks it is De Saxce's exact Coulomb NCP (eq. 73-77):
+//     C* ∋ u + E s(u)  ⟂  lambda ∈ C,    u = A lambda - b.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "stiction/constraint.hpp"
+#include "stiction/delassus.hpp"
+
+namespace stiction {
+
+class ContactProblem {
+ public:
+  /// Validates everything and throws std::invalid_argument naming the fault:
+  /// sizes, non-finite entries, mu < 0 or non-finite, and an asymmetry of A
+  /// above `asymmetry_tolerance` (relative, see DelassusOperator::relativeAsymmetry).
+  ContactProblem(std::shared_ptr<const DelassusOperator> delassus, Eigen::VectorXd b,
+                 std::vector<Constraint> constraints, double asymmetry_tolerance = 1e-9);
+
+  const DelassusOperator& delassus() const { return *delassus_; }
+  const std::shared_ptr<const DelassusOperator>& delassusPtr() const { return delassus_; }
+  const Eigen::VectorXd& b() const { return b_; }
+  const std::vector<Constraint>& constraints() const { return constraints_; }
+  /// Row offset of block i (size numBlocks()+1; the last entry is numRows()).
+  const std::vector<Eigen::Index>& offsets() const { return offsets_; }
+
+  Eigen::Index numRows() const { return b_.size(); }
+  std::size_t numBlocks() const { return constraints_.size(); }
+  double asymmetry() const { return asymmetry_; }
+  bool isSymmetric() const { return asymmetry_ == 0.0; }
+
+  /// Replace b (same size) without touching A: the cheap per-step update.
+  void setB(const Eigen::Ref<const Eigen::VectorXd>& b);
+
+ private:
+  std::shared_ptr<const DelassusOperator> delassus_;
+  Eigen::VectorXd b_;
+  std::vector<Constraint> constraints_;
+  std::vector<Eigen::Index> offsets_;
+  double asymmetry_ = 0.0;
+};
+
+}  // namespace stiction
