@@ -2,12 +2,15 @@
 
 #include <chrono>
 #include <cmath>
+#include <limits>
 
 #include "stiction/cone.hpp"
 
 namespace stiction {
 
 namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // Jacobian of the projection onto {||x_t|| <= mu x_n} (k = 2 or 3, normal last).
 template <int K>
@@ -122,6 +125,8 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   }
   message = "iteration limit reached";
   int step = 0;
+  constexpr int kHistory = 4;
+  double history[kHistory] = {0.0, 0.0, 0.0, 0.0};
   evaluate(problem, lam, true);
   double f_norm = F_.norm();
   for (; step < max_steps; ++step) {
@@ -142,10 +147,14 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
       message = "singular Newton system";
       break;
     }
-    // Backtracking on ||F||.
-    double t = 1.0, best_norm = f_norm, best_t = 0.0;
+    // Non-monotone backtracking on ||F|| (against the worst of the last few
+    // values): the natural map is only semismooth, a strict decrease test
+    // rejects good steps across kinks.
+    double reference = f_norm;
+    for (double h : history) reference = std::max(reference, h);
+    double t = 1.0, best_norm = kInf, best_t = 0.0;
     trial_.resize(m);
-    for (int ls = 0; ls < 30; ++ls, t *= 0.5) {
+    for (int ls = 0; ls < 20; ++ls, t *= 0.5) {
       trial_ = lam + t * step_;
       evaluate(problem, trial_, false);
       const double n = F_.norm();
@@ -153,13 +162,18 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
         best_norm = n;
         best_t = t;
       }
-      if (n <= (1.0 - 1e-4 * t) * f_norm) break;
+      if (n <= (1.0 - 1e-4 * t) * reference) {
+        best_t = t;
+        best_norm = n;
+        break;
+      }
     }
-    if (best_t == 0.0) {
+    if (!(best_norm < reference)) {
       message = "stalled (no descent along the Newton direction)";
       evaluate(problem, lam, false);  // restore u_ for the caller's verdict
       break;
     }
+    history[step % kHistory] = f_norm;
     lam += best_t * step_;
     evaluate(problem, lam, true);
     f_norm = F_.norm();
@@ -182,27 +196,36 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
     return std::max(1e-9, settings.time_limit - std::chrono::duration<double>(Clock::now() - start).count());
   };
   Eigen::VectorXd& lam = result.lam;
-  int used = nsgs_.sweep(problem, lam, settings.max_iterations, settings.tolerance, 0.5,
-                         settings.time_limit, result.message);
-  if (result.message != "stalled") {
-    result.iterations = used;
-    return;
-  }
-  const Eigen::VectorXd from_nsgs = lam;
-  const double r_nsgs = residual(problem, lam);
   std::string msg;
-  const int newton_steps = 100;
-  used += newton_.run(problem, lam, newton_steps, settings.tolerance, remaining(), msg);
-  if (msg == "converged") {
-    result.message = "converged (nsgs, then newton)";
-    result.iterations = used;
-    return;
+  int used = 0, newton_failures = 0;
+  bool newton_used = false;
+  // Alternate: NSGS while it makes progress, Newton when it stalls. Newton
+  // converges fast near the solution; NSGS brings it there and takes over
+  // again where Newton's line search cannot descend.
+  while (used < settings.max_iterations) {
+    const double stall = newton_failures < 2 ? 0.1 : 0.0;
+    used += nsgs_.sweep(problem, lam, settings.max_iterations - used, settings.tolerance, stall,
+                        remaining(), msg);
+    if (msg != "stalled") break;
+    backup_ = lam;
+    const double r_before = residual(problem, lam);
+    std::string newton_msg;
+    used += newton_.run(problem, lam, 50, settings.tolerance, remaining(), newton_msg);
+    newton_used = true;
+    if (newton_msg == "converged") {
+      msg = "converged";
+      break;
+    }
+    const double r_after = residual(problem, lam);
+    if (!(r_after < r_before)) lam = backup_;
+    if (!(r_after < 0.1 * r_before)) ++newton_failures;
+    if (newton_msg == "time limit reached") {
+      msg = newton_msg;
+      break;
+    }
   }
-  if (residual(problem, lam) > r_nsgs) lam = from_nsgs;
-  const int left = std::max(0, settings.max_iterations - used);
-  used += nsgs_.sweep(problem, lam, left, settings.tolerance, 0.0, remaining(), msg);
-  result.message = msg == "converged" ? "converged (nsgs, newton, nsgs)" : msg;
   result.iterations = used;
+  result.message = msg == "converged" && newton_used ? "converged (nsgs + newton)" : msg;
 }
 
 }  // namespace stiction

@@ -36,8 +36,8 @@ class NewtonSolver final : public ContactSolver {
 };
 
 /// The default: NSGS while it makes progress (cheap sweeps, exact local
-/// solves), then Newton from the NSGS iterate if NSGS stalls, then NSGS again
-/// from the best point if Newton could not finish.
+/// solves), Newton from the NSGS iterate when NSGS stalls, and back to NSGS
+/// from the better point when Newton's line search cannot descend.
 class DefaultSolver final : public ContactSolver {
  public:
   std::string name() const override { return "default"; }
@@ -47,6 +47,7 @@ class DefaultSolver final : public ContactSolver {
  private:
   NsgsSolver nsgs_;
   NewtonSolver newton_;
+  Eigen::VectorXd backup_;
 };
 
 }  // namespace stiction
