@@ -41,6 +41,23 @@ void projectOntoConstraints(const ContactProblem& problem, Eigen::Ref<Eigen::Vec
   }
 }
 
+namespace {
+
+// v += sign * E s(u): the De Saxce shift mu ||u_t|| on each normal row (eq. 76-77).
+void addDesaxce(const ContactProblem& problem, const Eigen::VectorXd& u, double sign, Eigen::VectorXd& v) {
+  const auto& cons = problem.constraints();
+  const auto& off = problem.offsets();
+  for (std::size_t i = 0; i < cons.size(); ++i) {
+    const Eigen::Index o = off[i];
+    if (cons[i].kind == ConstraintKind::kSpatialFriction)
+      v[o + 2] += sign * cons[i].mu * std::hypot(u[o], u[o + 1]);
+    else if (cons[i].kind == ConstraintKind::kPlanarFriction)
+      v[o + 1] += sign * cons[i].mu * std::abs(u[o]);
+  }
+}
+
+}  // namespace
+
 void AdmmSolver::factorize(const ContactProblem& problem, double shift) {
   const Eigen::MatrixXd& A = problem.delassus().dense();
   shifted_ = A;
@@ -83,30 +100,29 @@ void AdmmSolver::iterate(const ContactProblem& problem, const SolverSettings& se
   z_ = lam;
   projectOntoConstraints(problem, z_);
   u_.resize(m);
-  A.multiply(z_, u_);
-  u_ -= problem.b();
-  // Dual guess: at the solution y = -(u + E s(u)).
-  y_ = -u_;
+  ulam_.resize(m);
   rhs_.resize(m);
-  auto add_desaxce = [&](Eigen::VectorXd& v, double sign) {
-    for (std::size_t i = 0; i < cons.size(); ++i) {
-      const Eigen::Index o = off[i];
-      if (cons[i].kind == ConstraintKind::kSpatialFriction)
-        v[o + 2] += sign * cons[i].mu * std::hypot(u_[o], u_[o + 1]);
-      else if (cons[i].kind == ConstraintKind::kPlanarFriction)
-        v[o + 1] += sign * cons[i].mu * std::abs(u_[o]);
-    }
-  };
-  add_desaxce(y_, -1.0);
+  // Dual guess: at the solution y = -(u + E s(u)); from a cold start y = 0.
+  y_.setZero(m);
+  if (z_.squaredNorm() > 0.0) {
+    A.multiply(z_, u_);
+    u_ -= problem.b();
+    y_ = -u_;
+    addDesaxce(problem, u_, -1.0, y_);
+  }
   lam = z_;
-
   result.message = "iteration limit reached";
   int it = 0;
   int last_rho_change = 0;
   for (; it < settings.max_iterations; ++it) {
-    // lambda-update: (A + (rho + prox) I) lambda = b - E s + rho z - y + prox lambda
+    // lambda-update: (A + (rho + prox) I) lambda = b - E s + rho z - y + prox lambda.
+    // s comes from the unconstrained iterate lambda, not from z: measured on
+    // sliding stacks, s(z) makes the iteration cycle (mass ratio 1e2 already),
+    // s(lambda) converges.
+    A.multiply(lam, ulam_);
+    ulam_ -= problem.b();
     rhs_ = problem.b() + rho * z_ - y_ + prox * lam;
-    add_desaxce(rhs_, -1.0);
+    addDesaxce(problem, ulam_, -1.0, rhs_);
     lam = rhs_;
     solveShifted(lam);
     // z-update and dual ascent

@@ -70,6 +70,8 @@ void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen:
   const auto& off = problem.offsets();
   const Eigen::MatrixXd& A = problem.delassus().dense();
   states.resize(cons.size());
+  // Tangential speeds below this are solver noise, not sliding.
+  const double speed_floor = 1.5e-8 * std::max(problem.b().lpNorm<Eigen::Infinity>(), 1e-300);
   for (std::size_t i = 0; i < cons.size(); ++i) {
     const Eigen::Index o = off[i];
     const int k = cons[i].size;
@@ -101,7 +103,7 @@ void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen:
       a_tt = A(o, o);
     }
     const double margin = std::max(0.0, cons[i].mu * lam[n] - lt);
-    states[i] = ut > a_tt * margin && ut > 0.0 ? ContactState::kSlip : ContactState::kStick;
+    states[i] = ut > a_tt * margin && ut > speed_floor ? ContactState::kSlip : ContactState::kStick;
   }
 }
 

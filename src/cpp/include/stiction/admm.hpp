@@ -3,8 +3,9 @@
 // For fixed s the problem is the convex cone QP  min 1/2 l'A l - (b - E s)'l,
 // l in C. ADMM splits it into a linear solve with (A + (rho + prox) I), which is
 // nonsingular even for a rank-deficient A, and a projection onto C; s is
-// refreshed from u = A z - b at every iteration, so the fixed point is the exact
-// Coulomb NCP, not the CCP relaxation (eq. 79). rho follows residual balancing.
+// refreshed from u = A lambda - b at every iteration, so the fixed point is the
+// exact Coulomb NCP, not the CCP relaxation (eq. 79). rho follows residual
+// balancing (primal against dual residual, refactorizing when it changes).
 #pragma once
 
 #include <Eigen/Cholesky>
@@ -28,7 +29,7 @@ class AdmmSolver final : public ContactSolver {
   Eigen::MatrixXd shifted_;
   Eigen::LLT<Eigen::MatrixXd> llt_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
-  Eigen::VectorXd z_, z_prev_, y_, u_, rhs_;
+  Eigen::VectorXd z_, z_prev_, y_, u_, ulam_, rhs_;
 };
 
 /// Largest eigenvalue of the symmetric part of A by power iteration (an estimate).

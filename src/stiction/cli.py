@@ -1,0 +1,148 @@
+"""Command line: ``stiction demo``, ``stiction fclib FILE...``, ``stiction solvers``."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from . import fclib, solver_names, solve
+
+# Problems the demo solves: small, varied, one per family that shows something.
+DEMO_PROBLEMS = [
+    "Toy--FrictionContact3D_RR_1c.dat",
+    "Rover--Rover1039.dat",
+    "OneObject--OneObject-i1028-138.hdf5.dat",
+    "BoxesStack--BoxesStack1-i100000-32.hdf5.dat",
+    "PerioBox--LMGC_100_PR_PerioBox-i00361-60-03000.hdf5",
+    "Confeti--Confeti-ex13-Fc3D-SBM.dat",
+]
+
+
+def bundled_fclib_dir() -> Path:
+    """benchmarks/fclib of the source tree (the package is installed editable from it)."""
+    here = Path(__file__).resolve()
+    for parent in here.parents:
+        candidate = parent / "benchmarks" / "fclib"
+        if candidate.is_dir():
+            return candidate
+    raise FileNotFoundError("benchmarks/fclib not found next to the stiction sources")
+
+
+def _warm_start_arg(value: str | None, problem: fclib.FclibProblem):
+    if value in (None, "none"):
+        return None
+    if value == "proxqp":
+        return "proxqp"
+    if value == "file":
+        return problem.guess  # None if the file has no guess
+    raise ValueError(f"unknown warm start {value!r}")
+
+
+def solve_file(path: str, solver: str, tol: float, max_iter: int, time_limit: float,
+               warm_start: str | None) -> dict:
+    P = fclib.load(path)
+    problem = P.problem()
+    res = solve(problem, solver=solver, tol=tol, max_iter=max_iter, time_limit=time_limit,
+                warm_start=_warm_start_arg(warm_start, P))
+    states = [s.name for s in res.states]
+    return {
+        "file": os.path.basename(path),
+        "contacts": P.contacts,
+        "rows": problem.num_rows,
+        "solver": res.solver,
+        "residual": res.residual,
+        "siconos_residual": P.siconos_residual(res.lam),
+        "iterations": res.iterations,
+        "converged": bool(res.converged),
+        "seconds": res.seconds,
+        "warm_start_seconds": res.warm_start_seconds,
+        "message": res.message,
+        "states": {k: states.count(k) for k in ("open", "stick", "slip")},
+    }
+
+
+def _table(rows: list[dict]) -> str:
+    head = f"{'file':52s} {'nc':>4s} {'residual':>9s} {'siconos':>9s} {'iter':>5s} {'ms':>9s}  {'open/stick/slip':15s} status"
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        st = r["states"]
+        lines.append(
+            f"{r['file'][:52]:52s} {r['contacts']:4d} {r['residual']:9.1e} {r['siconos_residual']:9.1e} "
+            f"{r['iterations']:5d} {r['seconds'] * 1e3:9.2f}  {st['open']:3d}/{st['stick']:3d}/{st['slip']:3d}      "
+            f"{'ok' if r['converged'] else 'NOT CONVERGED: ' + r['message']}"
+        )
+    return "\n".join(lines)
+
+
+def cmd_fclib(args) -> int:
+    rows = []
+    for path in args.files:
+        if not os.path.isfile(path):
+            print(f"stiction fclib: no such file: {path}", file=sys.stderr)
+            return 2
+        rows.append(solve_file(path, args.solver, args.tol, args.max_iter, args.time_limit, args.warm_start))
+    if args.json:
+        json.dump(rows, sys.stdout, indent=1, default=lambda x: None if isinstance(x, float) and math.isnan(x) else x)
+        sys.stdout.write("\n")
+    else:
+        print(_table(rows))
+    return 0 if all(r["converged"] for r in rows) else 1
+
+
+def cmd_demo(args) -> int:
+    root = bundled_fclib_dir()
+    print("stiction demo: the exact Coulomb problem A λ - b ∈ -lim N_C^{U_ε}(λ) (eq. 65)")
+    print(f"solved on real contact problems from Siconos and LMGC90 ({root}), solver '{args.solver}', tol {args.tol:g}\n")
+    rows = [solve_file(str(root / name), args.solver, args.tol, 5000, 30.0, None) for name in DEMO_PROBLEMS]
+    print(_table(rows))
+    ok = sum(r["converged"] for r in rows)
+    print(f"\n{ok}/{len(rows)} converged; residual = ‖λ - P_C(λ - (u + E s(u)))‖ / (1 + ‖b‖), "
+          "siconos = the same natural map / ‖b‖.")
+    print("All 36 bundled problems: stiction fclib benchmarks/fclib/*  (table in docs/fclib.md)")
+    return 0 if ok == len(rows) else 1
+
+
+def cmd_solvers(args) -> int:
+    for name in solver_names():
+        print(name)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="stiction", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("fclib", help="solve FCLib / Siconos .dat problems")
+    p.add_argument("files", nargs="+", metavar="FILE")
+    p.add_argument("--solver", default="default", choices=solver_names())
+    p.add_argument("--tol", type=float, default=1e-10, help="tolerance on the residual (default 1e-10)")
+    p.add_argument("--max-iter", type=int, default=5000)
+    p.add_argument("--time-limit", type=float, default=60.0, help="seconds per problem (default 60)")
+    p.add_argument("--warm-start", choices=["none", "proxqp", "file"], default="none",
+                   help="file: the /guesses/1 of the file when it has one")
+    p.add_argument("--json", action="store_true", help="print a JSON list instead of a table")
+    p.set_defaults(func=cmd_fclib)
+
+    p = sub.add_parser("demo", help="the default demo: solve bundled contact problems")
+    p.add_argument("--solver", default="default", choices=solver_names())
+    p.add_argument("--tol", type=float, default=1e-10)
+    p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("solvers", help="list the solver names")
+    p.set_defaults(func=cmd_solvers)
+
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except ValueError as exc:
+        print(f"stiction {args.command}: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

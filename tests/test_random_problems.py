@@ -1,0 +1,78 @@
+"""Random problems A = J M^-1 J^T with mixed constraint kinds, full rank and rank-deficient."""
+import numpy as np
+import pytest
+
+import stiction
+from stiction.problems import random_problem
+
+from conftest import SOLVERS
+
+MIXES = {
+    "spatial": ["spatial"] * 6,
+    "mixed": ["spatial", "planar", "unilateral", "bilateral3", "spatial", "bilateral1", "planar", "unilateral"],
+    "planar_scene": ["planar"] * 5 + ["bilateral2"],
+}
+
+
+def check_ncp(problem, lam, tol):
+    """The conditions of eq. 73-77 block by block, independently of the C++ residual."""
+    u = problem.A @ lam - problem.b
+    off = problem.offsets
+    for i, c in enumerate(problem.constraints):
+        l, v = lam[off[i]:off[i + 1]], u[off[i]:off[i + 1]]
+        kind = c.kind.name
+        if kind == "bilateral":
+            assert np.abs(v).max() <= tol
+            continue
+        ln, un = l[-1], v[-1]
+        lt, ut = l[:-1], v[:-1]
+        assert ln >= -tol and un >= -tol and abs(ln * un) <= tol * (1 + abs(ln) + abs(un))
+        if kind == "unilateral":
+            continue
+        assert np.linalg.norm(lt) <= c.mu * ln + tol
+        if ln > tol:
+            gap = c.mu * ln - np.linalg.norm(lt)
+            # stick (u_t = 0) or slip (on the cone, u_t opposite to lambda_t)
+            assert np.linalg.norm(ut) <= tol * 10 or (gap <= tol * 10 and np.allclose(
+                lt * np.linalg.norm(ut), -c.mu * ln * ut, atol=10 * tol * (1 + np.linalg.norm(ut))))
+
+
+@pytest.mark.parametrize("mix", sorted(MIXES))
+@pytest.mark.parametrize("rank", ["full", "deficient"])
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_random_problems_solve_to_1e_10(mix, rank, solver):
+    kinds = MIXES[mix]
+    rows = rows_of(kinds)
+    failures = []
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        dofs = rows + 3 if rank == "full" else max(3, rows // 2)
+        if rank == "deficient" and "bilateral" in " ".join(kinds):
+            dofs = rows - 2  # keep the bilateral rows solvable
+        p = random_problem(rng, kinds, dofs, mu_range=(0.1, 0.8))
+        r = stiction.solve(p, solver=solver, tol=1e-10, max_iter=20000)
+        if not r.converged:
+            failures.append((seed, r.residual, r.message))
+            continue
+        assert r.residual <= 1e-10
+        check_ncp(p, r.lam, 1e-7)
+    # ADMM is first-order: allow it one slow draw in eight, never the others.
+    assert len(failures) <= (1 if solver == "admm" else 0), failures
+
+
+def rows_of(kinds):
+    return sum(3 if k == "spatial" else 2 if k == "planar" else 1 if k == "unilateral" else int(k[-1])
+               for k in kinds)
+
+
+@pytest.mark.parametrize("mix", ["spatial", "mixed"])
+def test_solvers_agree_where_the_solution_is_unique(mix):
+    """Full-rank A and small mu: the NCP has one solution, every algorithm finds it.
+    (With redundant rows and larger mu the exact Coulomb problem can have several,
+    so there only the residual is compared.)"""
+    for seed in range(6):
+        kinds = MIXES[mix]
+        p = random_problem(np.random.default_rng(100 + seed), kinds, rows_of(kinds) + 4, mu_range=(0.05, 0.3))
+        lams = [stiction.solve(p, solver=s, tol=1e-13, max_iter=50000).lam for s in ("nsgs", "newton", "admm")]
+        for lam in lams[1:]:
+            np.testing.assert_allclose(lam, lams[0], atol=1e-8 * np.abs(lams[0]).max())
