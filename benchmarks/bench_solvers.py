@@ -14,7 +14,8 @@ Solver configurations (all on the same ContactProblem, A as stored):
 - Pinocchio ADMM and PGS through :func:`stiction.baselines.pinocchio_solve` (exact NCP,
   solve_ncp=True), at (tolerance 1e-8, 1000 iterations) and (1e-12, 10000 iterations).
   PGS is skipped above 1000 rows (it segfaults); a 10000-iteration run is skipped when its
-  predicted time (per-iteration time of the 1000-iteration run × 10000) exceeds 60 s.
+  predicted time (per-iteration time of the 1000-iteration run, if that ran ≥ 100 iterations,
+  × 10000) exceeds 60 s.
 
 What is measured, per problem and configuration:
 
@@ -56,6 +57,7 @@ STICTION_MAX_ITER = 2000
 STICTION_TIME_LIMIT = 20.0  # s, stiction's own per-solve cap
 SINGLE_RUN_ABOVE = 2.0  # s: a solve this long is not repeated
 PINOCCHIO_BUDGET = 60.0  # s: predicted longest Pinocchio solve we are willing to run
+RATE_MIN_ITERATIONS = 100  # a per-iteration time needs this many iterations to amortize the setup
 QUICK_MAX_ROWS = 200
 
 
@@ -148,6 +150,15 @@ def repeat_count(first_seconds: float, quick: bool) -> int:
     return int(min(most, max(3, budget / max(first_seconds, 1e-9))))
 
 
+def timed(run, quick: bool) -> tuple[float, int, object]:
+    """Call ``run() -> (seconds, result)`` adaptively; return (median seconds, runs, first result)."""
+    seconds, first = run()
+    times = [seconds]
+    for _ in range(repeat_count(seconds, quick) - 1):
+        times.append(run()[0])
+    return statistics.median(times), len(times), first
+
+
 _stiction_solvers: dict[str, stiction.Solver] = {}
 
 
@@ -159,29 +170,26 @@ def run_stiction(problem: stiction.ContactProblem, config: Config, quick: bool) 
     settings.max_iterations = config.max_iter
     settings.time_limit = STICTION_TIME_LIMIT
     settings.warm_start = stiction.WarmStart.none
-    times, first = [], None
-    while True:
+
+    def run():
         t0 = time.perf_counter()
         result = solver.solve(problem, settings)
-        times.append(time.perf_counter() - t0)
-        first = first or result
-        if len(times) >= repeat_count(times[0], quick):
-            break
-    return Measurement(config, len(times), statistics.median(times), int(first.iterations),
+        return time.perf_counter() - t0, result
+
+    median, runs, first = timed(run, quick)
+    return Measurement(config, runs, median, int(first.iterations),
                        float(stiction.residual(problem, first.lam)), bool(first.converged))
 
 
 def run_pinocchio(problem: stiction.ContactProblem, config: Config, quick: bool) -> Measurement:
     """Time Pinocchio's ``solver.solve`` alone (as measured by ``pinocchio_solve``), cold start."""
-    times, first = [], None
-    while True:
+
+    def run():
         result = pinocchio_solve(problem, config.method, tol=config.tol, max_iter=config.max_iter)
-        times.append(result.seconds)
-        first = first or result
-        if len(times) >= repeat_count(times[0], quick):
-            break
-    return Measurement(config, len(times), statistics.median(times), first.iterations,
-                       first.residual, first.converged)
+        return result.seconds, result
+
+    median, runs, first = timed(run, quick)
+    return Measurement(config, runs, median, first.iterations, first.residual, first.converged)
 
 
 def measure_case(case: Case, quick: bool) -> dict[Config, Measurement]:
@@ -192,9 +200,12 @@ def measure_case(case: Case, quick: bool) -> dict[Config, Measurement]:
         if config.method == "pgs" and case.problem.num_rows > PGS_MAX_ROWS:
             out[config] = Measurement(config, skipped=f"PGS > {PGS_MAX_ROWS} rows (segfaults)")
             continue
-        cheaper = [m for c, m in out.items() if c.library == "pinocchio" and c.method == config.method]
-        if cheaper and cheaper[0].iterations > 0:
-            predicted = cheaper[0].median_s / cheaper[0].iterations * config.max_iter
+        # The same method's cheaper configuration (measured first) predicts this one's cost,
+        # if it ran long enough for its per-iteration time to exclude the setup (factorization).
+        cheaper = next((m for c, m in out.items()
+                        if c.library == "pinocchio" and c.method == config.method), None)
+        if cheaper is not None and cheaper.iterations >= RATE_MIN_ITERATIONS:
+            predicted = cheaper.median_s / cheaper.iterations * config.max_iter
             if predicted > PINOCCHIO_BUDGET:
                 out[config] = Measurement(config, skipped=f"predicted {predicted:.0f} s > budget")
                 continue
@@ -278,13 +289,13 @@ def headline_table(cases: list[Case], results: dict[str, dict[Config, Measuremen
             b = best_of([m for c, m in r.items() if c.method == method and c.library == "pinocchio"])
             bests[method] = b
             if b is None:
-                skipped = r[PINOCCHIO_CONFIGS[2 if method == "pgs" else 0]].skipped
-                cells += ["–", "skipped", skipped, "–"]
+                reason = next(m.skipped for c, m in r.items() if c.method == method)
+                cells += ["–", f"skipped: {reason}", "–", "–"]
             else:
                 cells += [f"{b.config.tol:.0e}", fmt_us(b.median_s), fmt_res(b.residual), fmt_claim(b)]
         a = bests["admm"]
         if s.solved and a is not None and a.solved:
-            ratio = f"{s.median_s / a.median_s:.2f}"
+            ratio = f"{s.median_s / a.median_s:.2g}"
         else:
             failed = [name for name, m in (("stiction", s), ("ADMM", a)) if m is None or not m.solved]
             ratio = " and ".join(failed) + " failed"
@@ -346,8 +357,8 @@ def summary(cases: list[Case], results: dict[str, dict[Config, Measurement]]) ->
         ratios = [results[c.name][sc].median_s / best["admm"][c.name].median_s for c in cases
                   if results[c.name][sc].solved and best["admm"][c.name] is not None
                   and best["admm"][c.name].solved]
-        text = (f"{statistics.median(ratios):.2f} over {len(ratios)} problems "
-                f"(min {min(ratios):.2f}, max {max(ratios):.2f})") if ratios else "no common problem"
+        text = (f"{statistics.median(ratios):.2g} over {len(ratios)} problems "
+                f"(min {min(ratios):.2g}, max {max(ratios):.2g})") if ratios else "no common problem"
         lines.append(f"- {sc.label}: {text}")
     lines.append("")
 

@@ -87,3 +87,13 @@ def test_non_convergence_is_reported_with_its_residual(solver):
     assert r.residual == pytest.approx(stiction.residual(p, r.lam), rel=1e-12)
     assert r.message and r.message != "converged"
     assert np.all(np.isfinite(r.lam))
+
+
+@pytest.mark.parametrize("solver", ["default", "nsgs", "newton", "admm"])
+def test_zero_iterations_evaluates_the_guess(solver):
+    p = ContactProblem(A3, B3, SPATIAL)
+    guess = np.array([0.1, 0.0, 0.2])
+    r = stiction.solve(p, solver=solver, max_iter=0, warm_start=guess)
+    assert r.iterations == 0
+    np.testing.assert_array_equal(r.lam, guess)
+    assert r.residual == pytest.approx(stiction.residual(p, guess))

@@ -48,14 +48,6 @@ class FclibProblem:
             asymmetry_tolerance,
         )
 
-    def siconos_residual(self, lam: np.ndarray) -> float:
-        """Natural-map residual divided by ||q|| (Siconos' and the FCLib papers' measure)."""
-        from ._core import residual
-
-        nb = np.linalg.norm(self.b)
-        r = residual(self.problem(), np.asarray(lam, dtype=np.float64)) * (1.0 + nb)
-        return r / nb if nb > 0 else r
-
 
 def _to_stiction_order(nc: int) -> np.ndarray:
     """Index array p with ours[i] = fclib[p[i]]: (n, t1, t2) -> (t1, t2, n)."""

@@ -55,7 +55,8 @@ void exposeSolver() {
       .value("proxqp", WarmStart::kProxQP);
 
   bp::class_<SolverSettings>("SolverSettings", "Stopping rules and warm start of a solve.")
-      .def_readwrite("tolerance", &SolverSettings::tolerance, "on the residual (natural map / (1 + ||b||))")
+      .def_readwrite("tolerance", &SolverSettings::tolerance,
+                     "on relative_residual (natural map / ||b||), hence also on residual")
       .def_readwrite("max_iterations", &SolverSettings::max_iterations)
       .def_readwrite("warm_start", &SolverSettings::warm_start)
       .def_readwrite("proxqp_facets", &SolverSettings::proxqp_facets)
@@ -69,7 +70,9 @@ void exposeSolver() {
       .add_property("states", &statesOf, "ContactState per block")
       .def_readonly("iterations", &SolverResult::iterations)
       .def_readonly("converged", &SolverResult::converged)
-      .def_readonly("residual", &SolverResult::residual)
+      .def_readonly("residual", &SolverResult::residual, "natural map / (1 + ||b||)")
+      .def_readonly("relative_residual", &SolverResult::relative_residual,
+                    "natural map / ||b|| (Siconos' measure); converged means this <= tolerance")
       .def_readonly("seconds", &SolverResult::seconds)
       .def_readonly("warm_start_seconds", &SolverResult::warm_start_seconds)
       .def_readonly("warm_start_iterations", &SolverResult::warm_start_iterations)

@@ -80,92 +80,95 @@ void AdmmSolver::solveShifted(Eigen::VectorXd& x) const {
     x = lu_.solve(x);
 }
 
-void AdmmSolver::iterate(const ContactProblem& problem, const SolverSettings& settings,
-                         SolverResult& result) {
+int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max_iterations,
+                    double tolerance, double time_limit, double initial_rho, bool resume,
+                    std::string& message) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   const Eigen::Index m = problem.numRows();
-  const auto& cons = problem.constraints();
-  const auto& off = problem.offsets();
   const DelassusOperator& A = problem.delassus();
-  const double scale = 1.0 + problem.b().norm();
-  symmetric_ = problem.isSymmetric();
-
-  const double L = std::max(largestEigenvalue(problem), 1e-300);
-  const double prox = 1e-10 * L;  // proximal term: keeps the linear solve well posed
-  double rho = settings.admm_rho > 0.0 ? settings.admm_rho : 1e-2 * L;
-  factorize(problem, rho + prox);
-
-  Eigen::VectorXd& lam = result.lam;
-  z_ = lam;
-  projectOntoConstraints(problem, z_);
-  u_.resize(m);
-  ulam_.resize(m);
-  rhs_.resize(m);
-  // Dual guess: at the solution y = -(u + E s(u)); from a cold start y = 0.
-  y_.setZero(m);
-  if (z_.squaredNorm() > 0.0) {
-    A.multiply(z_, u_);
-    u_ -= problem.b();
-    y_ = -u_;
-    addDesaxce(problem, u_, -1.0, y_);
-  }
-  lam = z_;
-  result.message = "iteration limit reached";
-  int it = 0;
-  int last_rho_change = 0;
-  for (; it < settings.max_iterations; ++it) {
-    // lambda-update: (A + (rho + prox) I) lambda = b - E s + rho z - y + prox lambda.
-    // s comes from the unconstrained iterate lambda, not from z: measured on
-    // sliding stacks, s(z) makes the iteration cycle (mass ratio 1e2 already),
-    // s(lambda) converges.
-    A.multiply(lam, ulam_);
-    ulam_ -= problem.b();
-    rhs_ = problem.b() + rho * z_ - y_ + prox * lam;
-    addDesaxce(problem, ulam_, -1.0, rhs_);
-    lam = rhs_;
-    solveShifted(lam);
-    // z-update and dual ascent
-    z_prev_ = z_;
-    z_ = lam + y_ / rho;
+  const double scale = stoppingScale(problem);
+  if (!resume || primal_.size() != m) {
+    symmetric_ = problem.isSymmetric();
+    L_ = std::max(largestEigenvalue(problem), 1e-300);
+    prox_ = 1e-10 * L_;  // proximal term: keeps the linear solve well posed
+    rho_ = initial_rho > 0.0 ? initial_rho : 1e-2 * L_;
+    factorize(problem, rho_ + prox_);
+    z_ = lam;
     projectOntoConstraints(problem, z_);
-    y_ += rho * (lam - z_);
+    u_.resize(m);
+    ulam_.resize(m);
+    rhs_.resize(m);
+    // Dual guess: at the solution y = -(u + E s(u)); from a cold start y = 0.
+    y_.setZero(m);
+    if (z_.squaredNorm() > 0.0) {
+      A.multiply(z_, u_);
+      u_ -= problem.b();
+      y_ = -u_;
+      addDesaxce(problem, u_, -1.0, y_);
+    }
+    primal_ = z_;
+    since_rho_change_ = 0;
+  }
+  message = "iteration limit reached";
+  int it = 0;
+  for (; it < max_iterations; ++it) {
+    // primal update: (A + (rho + prox) I) x = b - E s + rho z - y + prox x.
+    // s comes from the unconstrained iterate x, not from z: measured on
+    // sliding stacks, s(z) makes the iteration cycle (mass ratio 1e2 already),
+    // s(x) converges.
+    A.multiply(primal_, ulam_);
+    ulam_ -= problem.b();
+    rhs_ = problem.b() + rho_ * z_ - y_ + prox_ * primal_;
+    addDesaxce(problem, ulam_, -1.0, rhs_);
+    primal_ = rhs_;
+    solveShifted(primal_);
+    // z-update (projection onto C) and dual ascent
+    z_prev_ = z_;
+    z_ = primal_ + y_ / rho_;
+    projectOntoConstraints(problem, z_);
+    y_ += rho_ * (primal_ - z_);
     A.multiply(z_, u_);
     u_ -= problem.b();
     const double r = naturalMapNorm(problem, z_, u_) / scale;
-    if (r <= settings.tolerance) {
-      result.message = "converged";
+    if (r <= tolerance) {
+      message = "converged";
       ++it;
       break;
     }
     if (!std::isfinite(r)) {
-      result.message = "diverged (non-finite residual)";
+      message = "diverged (non-finite residual)";
       ++it;
       break;
     }
-    // Residual balancing: primal ||lambda - z|| against dual rho ||z - z_prev||.
-    const double primal = (lam - z_).lpNorm<Eigen::Infinity>();
-    const double dual = rho * (z_ - z_prev_).lpNorm<Eigen::Infinity>();
-    if (it - last_rho_change >= 5) {
+    // Residual balancing: primal ||x - z|| against dual rho ||z - z_prev||.
+    const double primal_res = (primal_ - z_).lpNorm<Eigen::Infinity>();
+    const double dual_res = rho_ * (z_ - z_prev_).lpNorm<Eigen::Infinity>();
+    if (++since_rho_change_ >= 5) {
       double factor = 1.0;
-      if (primal > 10.0 * dual) factor = 5.0;
-      else if (dual > 10.0 * primal) factor = 0.2;
-      const double new_rho = rho * factor;
-      if (factor != 1.0 && new_rho > 1e-8 * L && new_rho < 1e4 * L) {
-        rho = new_rho;
-        factorize(problem, rho + prox);
-        last_rho_change = it;
+      if (primal_res > 10.0 * dual_res) factor = 5.0;
+      else if (dual_res > 10.0 * primal_res) factor = 0.2;
+      const double new_rho = rho_ * factor;
+      if (factor != 1.0 && new_rho > 1e-8 * L_ && new_rho < 1e4 * L_) {
+        rho_ = new_rho;
+        factorize(problem, rho_ + prox_);
+        since_rho_change_ = 0;
       }
     }
-    if (settings.time_limit > 0.0 &&
-        std::chrono::duration<double>(Clock::now() - start).count() > settings.time_limit) {
-      result.message = "time limit reached";
+    if (time_limit > 0.0 && std::chrono::duration<double>(Clock::now() - start).count() > time_limit) {
+      message = "time limit reached";
       ++it;
       break;
     }
   }
   lam = z_;  // the feasible iterate
-  result.iterations = it;
+  return it;
+}
+
+void AdmmSolver::iterate(const ContactProblem& problem, const SolverSettings& settings,
+                         SolverResult& result) {
+  result.iterations = run(problem, result.lam, settings.max_iterations, settings.tolerance,
+                          settings.time_limit, settings.admm_rho, false, result.message);
 }
 
 }  // namespace stiction

@@ -117,7 +117,7 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   const auto& off = problem.offsets();
   const Eigen::MatrixXd& A = problem.delassus().dense();
   const Eigen::Index m = problem.numRows();
-  const double scale = 1.0 + problem.b().norm();
+  const double scale = stoppingScale(problem);
   kappa_.resize(cons.size());
   for (std::size_t i = 0; i < cons.size(); ++i) {
     const double tr = A.diagonal().segment(off[i], cons[i].size).sum();
@@ -195,37 +195,99 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
     if (settings.time_limit <= 0.0) return 0.0;
     return std::max(1e-9, settings.time_limit - std::chrono::duration<double>(Clock::now() - start).count());
   };
+  auto out_of_time = [&]() {
+    return settings.time_limit > 0.0 &&
+           std::chrono::duration<double>(Clock::now() - start).count() >= settings.time_limit;
+  };
   Eigen::VectorXd& lam = result.lam;
-  std::string msg;
-  int used = 0, newton_failures = 0;
-  bool newton_used = false;
-  // Alternate: NSGS while it makes progress, Newton when it stalls. Newton
-  // converges fast near the solution; NSGS brings it there and takes over
-  // again where Newton's line search cannot descend.
-  while (used < settings.max_iterations) {
-    const double stall = newton_failures < 2 ? 0.1 : 0.0;
-    used += nsgs_.sweep(problem, lam, settings.max_iterations - used, settings.tolerance, stall,
-                        remaining(), msg);
-    if (msg != "stalled") break;
-    backup_ = lam;
-    const double r_before = residual(problem, lam);
-    std::string newton_msg;
-    used += newton_.run(problem, lam, 50, settings.tolerance, remaining(), newton_msg);
-    newton_used = true;
+  const int budget = settings.max_iterations;
+  const double tol = settings.tolerance;
+  std::string msg, newton_msg;
+  int used = 0;
+
+  best_ = lam;
+  double best_res = residual(problem, lam);
+  double r = best_res;
+  auto keep_best = [&](const Eigen::VectorXd& x) {
+    r = residual(problem, x);
+    if (r < best_res) {
+      best_ = x;
+      best_res = r;
+    }
+  };
+  if (problem.numRows() <= kNewtonFirstRows) {
+    // 1a. Small problems (a robot's feet, a box's corners): a dense Newton step
+    //     costs less than a few Gauss-Seidel sweeps and converges in a handful.
+    used += newton_.run(problem, lam, std::min(30, budget), tol, remaining(), newton_msg);
     if (newton_msg == "converged") {
-      msg = "converged";
-      break;
+      result.iterations = used;
+      result.message = "converged (newton)";
+      return;
     }
-    const double r_after = residual(problem, lam);
-    if (!(r_after < r_before)) lam = backup_;
-    if (!(r_after < 0.1 * r_before)) ++newton_failures;
-    if (newton_msg == "time limit reached") {
-      msg = newton_msg;
-      break;
+    keep_best(lam);
+  } else {
+    // 1b. Large problems: NSGS while it makes progress (a sweep costs one product
+    //     with A), then Newton from the NSGS iterate where Gauss-Seidel crawls.
+    used += nsgs_.sweep(problem, lam, budget, tol, 0.1, remaining(), msg);
+    if (msg != "stalled") {
+      result.iterations = used;
+      result.message = msg;
+      return;
     }
+    keep_best(lam);
+    used += newton_.run(problem, lam, std::min(50, budget - used), tol, remaining(), newton_msg);
+    if (newton_msg == "converged") {
+      result.iterations = used;
+      result.message = "converged (nsgs, newton)";
+      return;
+    }
+    keep_best(lam);
   }
+  // 3. Alternate chunks of NSGS and of ADMM (never diverges, handles rank
+  //    deficiency; its state carries over between its chunks), each followed by
+  //    a Newton attempt from the chunk's iterate, until the budget is spent.
+  bool admm_started = false, use_admm = false;
+  Eigen::VectorXd admm_state = best_;
+  while (used < budget && !out_of_time()) {
+    const int chunk = std::min(500, budget - used);
+    if (use_admm) {
+      lam = admm_state;
+      used += admm_.run(problem, lam, chunk, tol, remaining(), 0.0, admm_started, msg);
+      admm_started = true;
+      admm_state = lam;
+    } else {
+      lam = best_;
+      used += nsgs_.sweep(problem, lam, chunk, tol, 0.1, remaining(), msg);
+    }
+    r = residual(problem, lam);
+    if (r < best_res) {
+      best_ = lam;
+      best_res = r;
+    }
+    if (msg == "converged") {
+      result.iterations = used;
+      result.message = use_admm ? "converged (nsgs, newton, admm)" : "converged (nsgs, newton, nsgs)";
+      return;
+    }
+    if (msg == "time limit reached" || used >= budget) break;
+    trial_ = lam;
+    used += newton_.run(problem, trial_, std::min(20, budget - used), tol, remaining(), newton_msg);
+    r = residual(problem, trial_);
+    if (r < best_res) {
+      best_ = trial_;
+      best_res = r;
+    }
+    if (newton_msg == "converged") {
+      lam = trial_;
+      result.iterations = used;
+      result.message = "converged (nsgs, newton, admm/nsgs, newton)";
+      return;
+    }
+    use_admm = !use_admm;
+  }
+  lam = best_;
   result.iterations = used;
-  result.message = msg == "converged" && newton_used ? "converged (nsgs + newton)" : msg;
+  result.message = out_of_time() ? "time limit reached" : "iteration limit reached";
 }
 
 }  // namespace stiction

@@ -67,7 +67,7 @@ int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
   const DelassusOperator& A = problem.delassus();
-  const double scale = 1.0 + problem.b().norm();
+  const double scale = stoppingScale(problem);
 
   // Start from a feasible point.
   for (std::size_t i = 0; i < cons.size(); ++i) {

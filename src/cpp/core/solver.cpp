@@ -64,6 +64,11 @@ double residual(const ContactProblem& problem, const Eigen::Ref<const Eigen::Vec
   return naturalMapNorm(problem, lam, u) / (1.0 + problem.b().norm());
 }
 
+double stoppingScale(const ContactProblem& problem) {
+  const double nb = problem.b().norm();
+  return nb > 0.0 ? nb : 1.0;
+}
+
 void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
                     const Eigen::Ref<const Eigen::VectorXd>& u, std::vector<ContactState>& states) {
   const auto& cons = problem.constraints();
@@ -153,9 +158,11 @@ void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSet
   // The common verdict, whatever the algorithm.
   problem.delassus().multiply(result.lam, result.u);
   result.u -= problem.b();
-  result.residual = naturalMapNorm(problem, result.lam, result.u) / (1.0 + problem.b().norm());
+  const double map = naturalMapNorm(problem, result.lam, result.u);
+  result.residual = map / (1.0 + problem.b().norm());
+  result.relative_residual = map / stoppingScale(problem);
   classifyStates(problem, result.lam, result.u, result.states);
-  result.converged = std::isfinite(result.residual) && result.residual <= settings.tolerance &&
+  result.converged = std::isfinite(map) && result.relative_residual <= settings.tolerance &&
                      result.lam.allFinite();
   if (!result.converged && result.message == "converged") result.message = "residual above tolerance";
   result.seconds = std::chrono::duration<double>(Clock::now() - start).count();

@@ -21,11 +21,20 @@ class AdmmSolver final : public ContactSolver {
   void iterate(const ContactProblem& problem, const SolverSettings& settings,
                SolverResult& result) override;
 
+  /// ADMM iterations from lam (or, with resume, from the state the previous call
+  /// left: z, y, rho and the factorization). Writes the feasible iterate z into
+  /// lam; returns the number of iterations.
+  int run(const ContactProblem& problem, Eigen::VectorXd& lam, int max_iterations, double tolerance,
+          double time_limit, double initial_rho, bool resume, std::string& message);
+
  private:
   void factorize(const ContactProblem& problem, double shift);
   void solveShifted(Eigen::VectorXd& x) const;
 
   bool symmetric_ = true;
+  double L_ = 0.0, prox_ = 0.0, rho_ = 0.0;
+  int since_rho_change_ = 0;
+  Eigen::VectorXd primal_;  // the unprojected iterate x
   Eigen::MatrixXd shifted_;
   Eigen::LLT<Eigen::MatrixXd> llt_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;

@@ -11,6 +11,7 @@
 
 #include <Eigen/LU>
 
+#include "stiction/admm.hpp"
 #include "stiction/nsgs.hpp"
 #include "stiction/solver.hpp"
 
@@ -35,11 +36,17 @@ class NewtonSolver final : public ContactSolver {
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
 };
 
-/// The default: NSGS while it makes progress (cheap sweeps, exact local
-/// solves), Newton from the NSGS iterate when NSGS stalls, and back to NSGS
-/// from the better point when Newton's line search cannot descend.
+/// The default. Small problems (<= kNewtonFirstRows rows): Newton first. Larger
+/// ones: NSGS while it makes progress (cheap sweeps, exact local solves), then
+/// Newton from the NSGS iterate. If Newton's line search cannot finish:
+/// alternating chunks of NSGS and ADMM (500 iterations at most), each followed
+/// by a Newton attempt from its iterate. Returns the best iterate met.
 class DefaultSolver final : public ContactSolver {
  public:
+  /// Up to this many rows a dense Newton step is cheaper than a few sweeps
+  /// (measured: docs/solvers.md).
+  static constexpr Eigen::Index kNewtonFirstRows = 64;
+
   std::string name() const override { return "default"; }
   void iterate(const ContactProblem& problem, const SolverSettings& settings,
                SolverResult& result) override;
@@ -47,7 +54,8 @@ class DefaultSolver final : public ContactSolver {
  private:
   NsgsSolver nsgs_;
   NewtonSolver newton_;
-  Eigen::VectorXd backup_;
+  AdmmSolver admm_;
+  Eigen::VectorXd best_, trial_;
 };
 
 }  // namespace stiction

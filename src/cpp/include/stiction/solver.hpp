@@ -19,7 +19,7 @@ enum class WarmStart {
 };
 
 struct SolverSettings {
-  double tolerance = 1e-10;   ///< on SolverResult::residual
+  double tolerance = 1e-10;   ///< on SolverResult::relative_residual (hence also on residual)
   int max_iterations = 2000;  ///< sweeps (NSGS) / iterations (ADMM, Newton)
   WarmStart warm_start = WarmStart::kNone;
   int proxqp_facets = 8;       ///< edges of the pyramid that replaces each spatial cone
@@ -36,6 +36,12 @@ double naturalMapNorm(const ContactProblem& problem, const Eigen::Ref<const Eige
 /// The residual every result reports: naturalMapNorm / (1 + ||b||).
 double residual(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam);
 
+/// ||b||, or 1 when b = 0: the scale of relative_residual (Siconos divides by ||q|| = ||b||).
+/// Solvers stop on naturalMapNorm <= tolerance * stoppingScale, which is the stricter of
+/// the two measures, so a problem scaled down (tiny b and lambda) is still solved to
+/// relative accuracy instead of passing on an absolute test.
+double stoppingScale(const ContactProblem& problem);
+
 struct SolverResult {
   Eigen::VectorXd lam;  ///< the impulse / force lambda (numRows)
   Eigen::VectorXd u;    ///< A lambda - b (numRows)
@@ -43,6 +49,7 @@ struct SolverResult {
   int iterations = 0;
   bool converged = false;
   double residual = 0.0;          ///< naturalMapNorm / (1 + ||b||)
+  double relative_residual = 0.0; ///< naturalMapNorm / ||b|| (Siconos' measure; >= residual)
   double seconds = 0.0;           ///< wall time of the whole solve, warm start included
   double warm_start_seconds = 0.0;
   int warm_start_iterations = 0;  ///< ProxQP iterations when warm_start == kProxQP
