@@ -238,7 +238,7 @@ def fmt_claim(m: Measurement) -> str:
     return "yes" if m.claimed else "no"
 
 
-def header_lines(args) -> list[str]:
+def header_lines(args, started: datetime.datetime) -> list[str]:
     cpu = "unknown"
     for line in Path("/proc/cpuinfo").read_text().splitlines():
         if line.startswith("model name"):
@@ -249,13 +249,16 @@ def header_lines(args) -> list[str]:
                                 capture_output=True, text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         commit = "unknown"
+    core = Path(stiction._core.__file__)
+    built = datetime.datetime.fromtimestamp(core.stat().st_mtime).astimezone()
     mode = "quick" if args.quick else "full"
     return [
         "# stiction vs Pinocchio solvers",
         "",
-        f"{datetime.datetime.now().astimezone().isoformat(timespec='seconds')} · "
+        f"{started.isoformat(timespec='seconds')} · "
         f"{platform.machine()} · {cpu} · pin {pin.__version__} · stiction {stiction.__version__} "
-        f"(git {commit}) · numpy {np.__version__} · Python {platform.python_version()} · "
+        f"(git {commit}, core built {built.isoformat(timespec='seconds')}) · "
+        f"numpy {np.__version__} · Python {platform.python_version()} · "
         f"mode {mode}" + (f" · filter '{args.filter}'" if args.filter else ""),
         "",
         "Times: median wall time (µs) of the solve call alone, cold start, over the runs shown in "
@@ -345,8 +348,9 @@ def summary(cases: list[Case], results: dict[str, dict[Config, Measurement]]) ->
         lines.append(row(c.label, {k: r[c] for k, r in results.items()}))
     best = {}
     for method in ("admm", "pgs"):
-        best[method] = {k: best_of([m for c, m in r.items() if c.library == "pinocchio" and c.method == method])
-                        for k, r in results.items()}
+        best[method] = {
+            k: best_of([m for c, m in r.items() if c.library == "pinocchio" and c.method == method])
+            for k, r in results.items()}
         lines.append(row(f"{method.upper()} best of its 2 configurations", best[method]))
     lines.append("")
 
@@ -365,7 +369,8 @@ def summary(cases: list[Case], results: dict[str, dict[Config, Measurement]]) ->
     lines.append(f"Claims of convergence with residual > {SOLVED:.0e}:")
     lines.append("")
     false = [(case.name, m) for case in cases for m in results[case.name].values() if m.false_claim]
-    lines += [f"- {name}: {m.config.label}, residual {fmt_res(m.residual)}" for name, m in false] or ["- none"]
+    lines += [f"- {name}: {m.config.label}, residual {fmt_res(m.residual)}"
+              for name, m in false] or ["- none"]
     lines.append("")
 
     unsolved = [c.name for c in cases if not any(m.solved for m in results[c.name].values())]
@@ -386,6 +391,7 @@ def main(argv: list[str] | None = None) -> int:
     if not cases:
         parser.error("no problem matches")
     results: dict[str, dict[Config, Measurement]] = {}
+    started = datetime.datetime.now().astimezone()
     t_start = time.perf_counter()
     for i, case in enumerate(cases, 1):
         t0 = time.perf_counter()
@@ -393,7 +399,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[{i}/{len(cases)}] {case.name} ({case.problem.num_rows} rows): "
               f"{time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
 
-    lines = header_lines(args)
+    lines = header_lines(args, started)
     lines += headline_table(cases, results)
     lines += summary(cases, results)
     lines += detail_table("stiction, all configurations", STICTION_CONFIGS, cases, results)

@@ -12,6 +12,8 @@ namespace stiction {
 
 namespace {
 
+constexpr double kInfSweeps = 1e300;
+
 // Inverse of a diagonal block; a singular block (dependent rows of one contact)
 // gets the smallest diagonal shift that makes it invertible, so the local solve
 // still returns a finite answer (the global verdict is made on the true residual).
@@ -60,7 +62,7 @@ void NsgsSolver::prepare(const ContactProblem& problem) {
 }
 
 int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int max_sweeps,
-                      double tolerance, double stall_ratio, double time_limit, std::string& message) {
+                      double tolerance, double switch_after, double time_limit, std::string& message) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   prepare(problem);
@@ -158,9 +160,14 @@ int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int m
       break;
     }
     history[it % 11] = r;
-    if (stall_ratio > 0.0 && it >= 10 && r > stall_ratio * history[(it - 10) % 11]) {
-      message = "stalled";
-      break;
+    if (switch_after > 0.0 && it >= 10) {
+      // Linear rate over the last 10 sweeps, and the sweeps it still needs.
+      const double rate = std::pow(r / history[(it - 10) % 11], 0.1);
+      const double needed = rate < 1.0 ? std::log(tolerance / r) / std::log(rate) : kInfSweeps;
+      if (needed > switch_after) {
+        message = "stalled";
+        break;
+      }
     }
     if (time_limit > 0.0 &&
         std::chrono::duration<double>(Clock::now() - start).count() > time_limit) {

@@ -37,8 +37,9 @@ class NewtonSolver final : public ContactSolver {
 };
 
 /// The default. Small problems (<= kNewtonFirstRows rows): Newton first. Larger
-/// ones: NSGS while it makes progress (cheap sweeps, exact local solves), then
-/// Newton from the NSGS iterate. If Newton's line search cannot finish:
+/// ones: NSGS while its rate promises to finish sooner than ~10 Newton steps
+/// (cheap sweeps, exact local solves), then Newton from the NSGS iterate and
+/// from the initial guess. If Newton's line search cannot finish:
 /// alternating chunks of NSGS and ADMM (500 iterations at most), each followed
 /// by a Newton attempt from its iterate. Returns the best iterate met.
 class DefaultSolver final : public ContactSolver {
@@ -55,7 +56,7 @@ class DefaultSolver final : public ContactSolver {
   NsgsSolver nsgs_;
   NewtonSolver newton_;
   AdmmSolver admm_;
-  Eigen::VectorXd best_, trial_;
+  Eigen::VectorXd best_, trial_, initial_;
 };
 
 }  // namespace stiction

@@ -17,11 +17,12 @@ class NsgsSolver final : public ContactSolver {
   void iterate(const ContactProblem& problem, const SolverSettings& settings,
                SolverResult& result) override;
 
-  /// Sweep at most `max_sweeps` times, or until the residual is below `tolerance`,
-  /// or (if stall_ratio > 0) until 10 sweeps together reduce the residual by less
-  /// than the factor stall_ratio. Returns the number of sweeps done.
+  /// Sweep at most `max_sweeps` times, or until the relative residual is below
+  /// `tolerance`, or (if switch_after > 0) until the convergence rate of the last
+  /// 10 sweeps predicts more than `switch_after` further sweeps to reach the
+  /// tolerance (message "stalled": time for another method). Returns the sweeps done.
   int sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int max_sweeps, double tolerance,
-            double stall_ratio, double time_limit, std::string& message);
+            double switch_after, double time_limit, std::string& message);
 
  private:
   void prepare(const ContactProblem& problem);
