@@ -76,3 +76,29 @@ def test_solvers_agree_where_the_solution_is_unique(mix):
         lams = [stiction.solve(p, solver=s, tol=1e-13, max_iter=50000).lam for s in ("nsgs", "newton", "admm")]
         for lam in lams[1:]:
             np.testing.assert_allclose(lam, lams[0], atol=1e-8 * np.abs(lams[0]).max())
+
+
+@pytest.mark.parametrize("mix", [["spatial"] * 5, ["spatial", "bilateral3", "spatial", "bilateral6", "spatial"]])
+def test_agrees_with_pinocchio_admm(mix):
+    """Pinocchio's ADMMConstraintSolver with solve_ncp=True solves the same exact Coulomb
+    NCP: on full-rank problems (unique solution) the impulses agree."""
+    from stiction.baselines import pinocchio_solve
+
+    for seed in range(6):
+        p = random_problem(np.random.default_rng(200 + seed), mix, rows_of(mix) + 4, mu_range=(0.1, 0.5))
+        ours = stiction.solve(p, tol=1e-13, max_iter=5000)
+        theirs = pinocchio_solve(p, "admm", tol=1e-12, max_iter=20000)
+        assert ours.converged and theirs.residual < 1e-9, (ours.residual, theirs.residual)
+        np.testing.assert_allclose(ours.lam, theirs.lam, atol=1e-7 * np.abs(ours.lam).max())
+
+
+@pytest.mark.parametrize("sliding", [False, True])
+def test_agrees_with_pinocchio_admm_on_the_rank_deficient_cube(sliding):
+    """A cube on 4 corners: lambda is not unique (rank 6 of 12), the velocities are."""
+    from stiction.baselines import pinocchio_solve
+    from stiction.problems import cube_on_ground
+
+    p = cube_on_ground(mu=0.3, velocity=(0.5 if sliding else 0.0, 0.0, 0.0)).problem
+    ours = stiction.solve(p, tol=1e-13)
+    theirs = pinocchio_solve(p, "admm", tol=1e-12, max_iter=20000)
+    np.testing.assert_allclose(ours.u, p.A @ theirs.lam - p.b, atol=1e-9)

@@ -5,5 +5,6 @@ namespace stiction {
 namespace python {
 void exposeProblem();
 void exposeSolver();
+void exposeSimulator();
 }  // namespace python
 }  // namespace stiction

@@ -11,4 +11,5 @@ BOOST_PYTHON_MODULE(_core) {
       "Compiled core of stiction: the contact problem of eq. 65 and its solvers.";
   stiction::python::exposeProblem();
   stiction::python::exposeSolver();
+  stiction::python::exposeSimulator();
 }

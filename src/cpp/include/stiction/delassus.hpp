@@ -47,6 +47,10 @@ class DenseDelassus final : public DelassusOperator {
   Eigen::MatrixXd diagonalBlock(Eigen::Index offset, Eigen::Index size) const override;
   const Eigen::MatrixXd& dense() const override { return A_; }
   double relativeAsymmetry() const override;
+  /// Mutable access for per-step updates of the same size (the simulator's A).
+  /// The caller keeps it symmetric positive semi-definite: problems built on
+  /// this operator validated it once.
+  Eigen::MatrixXd& matrix() { return A_; }
 
  private:
   Eigen::MatrixXd A_;

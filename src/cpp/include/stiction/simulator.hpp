@@ -1,0 +1,176 @@
+// The simulator: a Pinocchio model with frictional unilateral contacts and
+// bilateral anchors, stepped with the paper's two integration modes.
+//
+//   M(q) q'' + Phi(q, q', t) = J^T lambda                        (eq. 39)
+//   J q'' + J' q' + (2 zeta / delta) J q' + Psi / delta^2
+//        in -lim N_C^{U_eps}(lambda)                              (eq. 64)
+//
+// 1. Time stepping (eq. 70: delta = h, zeta = 1/2): the impulse h lambda
+//    solves A (h lambda) - h b in -N(...), then v+ = v_free + M^-1 J^T h lambda
+//    and q+ = integrate(q, h v+) (symplectic Euler on the configuration manifold).
+// 2. The relaxed DAI as an ODE (eq. 39 + 64): lambda(q, q') from eq. 65 at every
+//    right-hand-side evaluation, integrated by RK4 or by an embedded
+//    Bogacki-Shampine 3(2) pair with error control; delta, zeta are free.
+//
+// Model/Data split as in Pinocchio: SimulatorModel is the immutable
+// description, SimulatorData the per-step workspace (sized once; a step
+// allocates only when the number of active contacts changes).
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <pinocchio/multibody/data.hpp>
+#include <pinocchio/multibody/model.hpp>
+
+#include "stiction/contact_problem.hpp"
+#include "stiction/solver.hpp"
+
+namespace stiction {
+
+/// The half-space {x : normal . x >= offset} is free space; its boundary is a
+/// ground, a wall, or (frame != 0) a face of a body of the model, e.g. the top
+/// of a cube that carries another one. normal and offset are expressed in that
+/// frame. Tangents complete the normal to a right-handed frame (t1, t2, normal),
+/// the row order of every contact on it.
+struct HalfSpace {
+  std::string name;
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  double offset = 0.0;
+  pinocchio::FrameIndex frame = 0;  ///< 0: fixed in the world
+  Eigen::Vector3d tangent1 = Eigen::Vector3d::UnitX();
+  Eigen::Vector3d tangent2 = Eigen::Vector3d::UnitY();
+};
+
+/// A sphere of `radius` (0: a point, e.g. a box corner) fixed at `offset` in
+/// frame `frame`, touching half-space `halfspace` with friction `mu`.
+struct SphereContact {
+  std::string name;
+  pinocchio::FrameIndex frame = 0;
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();
+  double radius = 0.0;
+  int halfspace = 0;
+  double mu = 0.5;
+  bool planar = false;  ///< planar scenes: 2 rows (t1, n) instead of 3
+};
+
+/// A point of frame `frame` (at `offset`) held at the world point `target`:
+/// 3 bilateral rows (paper §3, eq. 24-27), e.g. a pendulum pinned to the world.
+struct PointAnchor {
+  std::string name;
+  pinocchio::FrameIndex frame = 0;
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();
+  Eigen::Vector3d target = Eigen::Vector3d::Zero();
+};
+
+enum class IntegrationMode { kTimeStepping = 0, kRK4 = 1, kAdaptive = 2 };
+
+struct SimulatorSettings {
+  double dt = 1e-3;               ///< time step (RK4), initial/maximal step (adaptive)
+  IntegrationMode mode = IntegrationMode::kTimeStepping;
+  double delta = 0.0;             ///< ODE modes: Baumgarte time constant (eq. 64); 0 = dt
+  double zeta = 0.5;              ///< ODE modes: damping ratio (eq. 64)
+  double ode_tolerance = 1e-6;    ///< adaptive mode: local error per unit time
+  double min_dt = 1e-7;           ///< adaptive mode: smallest step before giving up
+  double activation_distance = 0.02;  ///< a candidate enters the problem when its gap is below this
+  std::string solver = "default";
+  SolverSettings solver_settings;  ///< tolerance, iterations (warm start is set per step)
+  bool warm_start = true;          ///< start each solve from the previous step's lambda
+};
+
+/// Joint-space control: tau = kp (q_target - q) + kd (v_target - v) + tau_ff on
+/// the actuated velocity coordinates (kp, kd = 0 elsewhere, e.g. a free base).
+struct JointControl {
+  Eigen::VectorXd kp, kd;     ///< nv
+  Eigen::VectorXd q_target;   ///< nq (difference taken on the manifold)
+  Eigen::VectorXd v_target;   ///< nv
+  Eigen::VectorXd tau_ff;     ///< nv
+};
+
+class SimulatorModel {
+ public:
+  SimulatorModel(const pinocchio::Model& model, std::vector<HalfSpace> halfspaces,
+                 std::vector<SphereContact> contacts, std::vector<PointAnchor> anchors,
+                 SimulatorSettings settings);
+
+  pinocchio::Model model;
+  std::vector<HalfSpace> halfspaces;
+  std::vector<SphereContact> contacts;
+  std::vector<PointAnchor> anchors;
+  SimulatorSettings settings;
+};
+
+/// Microseconds spent per phase in the last step (summed over RHS evaluations in ODE modes).
+struct StepTimings {
+  double kinematics = 0.0;  ///< forward kinematics, Jacobians, contact detection and frames
+  double delassus = 0.0;    ///< M, its Cholesky, A = J M^-1 J^T, b
+  double solve = 0.0;
+  double integrate = 0.0;
+  double total = 0.0;
+};
+
+class SimulatorData {
+ public:
+  explicit SimulatorData(const SimulatorModel& sim);
+
+  pinocchio::Data data;
+  Eigen::VectorXd q, v;
+  double t = 0.0;
+  JointControl control;
+
+  // The last contact problem (active blocks in candidate order, then anchors).
+  std::vector<int> active;           ///< candidate index of each active contact block
+  Eigen::MatrixXd J;                 ///< rows x nv, rows (t1, t2, n) per contact, then anchors
+  Eigen::MatrixXd A;                 ///< rows x rows, J M^-1 J^T (eq. 22)
+  Eigen::VectorXd b;                 ///< eq. 27 at force level
+  Eigen::VectorXd drift;             ///< J' v per row
+  Eigen::VectorXd position_error;    ///< Psi per row (gap on normal rows, anchor error; 0 else)
+  Eigen::VectorXd gaps;              ///< signed distance per candidate contact
+  Eigen::VectorXd lambda;            ///< forces per row of the last solve
+  SolverResult result;               ///< the last solve
+
+  // Per candidate / anchor, after the last solve (inactive candidates: 0, open).
+  Eigen::MatrixXd candidate_lambda;  ///< 3 x candidates, force (t1, t2, n); planar: t2 = 0
+  std::vector<bool> have_candidate_lambda;
+  std::vector<ContactState> candidate_states;
+  Eigen::MatrixXd anchor_lambda;     ///< 3 x anchors
+
+  // Statistics of the last step (ODE modes solve once per right-hand side).
+  StepTimings timings;
+  int rhs_evaluations = 0;
+  int solves = 0;
+  int iterations_step = 0;
+  double max_residual_step = 0.0;
+  bool all_converged_step = true;
+  double last_dt = 0.0;  ///< the step actually taken
+  double next_dt = 0.0;  ///< adaptive mode: the proposal for the next step
+
+  // Workspace, reused from step to step.
+  Eigen::MatrixXd M, MinvJt, J6, Jrel;
+  Eigen::Matrix3Xd plane_normal, plane_t1, plane_t2;  ///< world axes of each half-space
+  Eigen::VectorXd plane_offset;
+  Eigen::LLT<Eigen::MatrixXd> llt;
+  Eigen::VectorXd tau, nle, v_free, dv, guess, q_tmp;
+  std::shared_ptr<DenseDelassus> delassus;
+  std::unique_ptr<ContactProblem> problem;
+  std::vector<int> problem_active;
+  std::unique_ptr<ContactSolver> solver;
+  std::vector<Eigen::VectorXd> stage_v, stage_a;
+};
+
+/// Advance sim_data by one step (time stepping: exactly dt; ODE modes: one
+/// RK4 step of dt, or one accepted adaptive step of at most dt).
+/// Throws std::runtime_error when the state becomes non-finite.
+void step(const SimulatorModel& sim, SimulatorData& sd);
+
+/// The contact problem (eq. 65) at the current state, for inspection and tests:
+/// fills sd.J, sd.A, sd.b (force level, eq. 27 with the given delta, zeta) and sd.active.
+void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
+                         const Eigen::VectorXd& v, double delta, double zeta);
+
+/// tau from the joint control at (q, v).
+void computeControl(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
+                    const Eigen::VectorXd& v);
+
+}  // namespace stiction

@@ -1,0 +1,467 @@
+// The only translation unit that instantiates Pinocchio's algorithms (slow to
+// compile: keep them here).
+#include "stiction/simulator.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+#include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
+
+namespace stiction {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double microseconds(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::micro>(b - a).count();
+}
+
+void completeTangents(HalfSpace& h) {
+  const double n = h.normal.norm();
+  if (!(n > 0.0) || !h.normal.allFinite())
+    throw std::invalid_argument("half-space '" + h.name + "': normal must be a finite non-zero vector");
+  h.normal /= n;
+  // t1: the world x axis projected on the plane (y if x is along the normal).
+  Eigen::Vector3d e = std::abs(h.normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  h.tangent1 = (e - h.normal * h.normal.dot(e)).normalized();
+  h.tangent2 = h.normal.cross(h.tangent1);  // (t1, t2, n) right-handed
+}
+
+int rowsOf(const SphereContact& c) { return c.planar ? 2 : 3; }
+
+}  // namespace
+
+SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfSpace> halfspaces_,
+                               std::vector<SphereContact> contacts_, std::vector<PointAnchor> anchors_,
+                               SimulatorSettings settings_)
+    : model(model_),
+      halfspaces(std::move(halfspaces_)),
+      contacts(std::move(contacts_)),
+      anchors(std::move(anchors_)),
+      settings(std::move(settings_)) {
+  for (HalfSpace& h : halfspaces) completeTangents(h);
+  const auto nframes = static_cast<pinocchio::FrameIndex>(model.nframes);
+  for (const HalfSpace& h : halfspaces)
+    if (h.frame >= nframes)
+      throw std::invalid_argument("half-space '" + h.name + "': frame index " + std::to_string(h.frame) +
+                                  " does not exist");
+  for (const SphereContact& c : contacts) {
+    if (c.frame >= nframes)
+      throw std::invalid_argument("contact '" + c.name + "': frame index " + std::to_string(c.frame) +
+                                  " does not exist (model has " + std::to_string(nframes) + " frames)");
+    if (c.halfspace < 0 || c.halfspace >= static_cast<int>(halfspaces.size()))
+      throw std::invalid_argument("contact '" + c.name + "': half-space index " +
+                                  std::to_string(c.halfspace) + " does not exist");
+    if (!(c.radius >= 0.0) || !std::isfinite(c.radius))
+      throw std::invalid_argument("contact '" + c.name + "': radius must be finite and >= 0");
+    if (!(c.mu >= 0.0) || !std::isfinite(c.mu))
+      throw std::invalid_argument("contact '" + c.name + "': friction coefficient mu must be finite and >= 0");
+    if (!c.offset.allFinite()) throw std::invalid_argument("contact '" + c.name + "': offset is not finite");
+  }
+  for (const PointAnchor& a : anchors) {
+    if (a.frame >= nframes)
+      throw std::invalid_argument("anchor '" + a.name + "': frame index " + std::to_string(a.frame) +
+                                  " does not exist");
+    if (!a.offset.allFinite() || !a.target.allFinite())
+      throw std::invalid_argument("anchor '" + a.name + "': offset and target must be finite");
+  }
+  const SimulatorSettings& s = settings;
+  if (!(s.dt > 0.0) || !std::isfinite(s.dt)) throw std::invalid_argument("dt must be positive and finite");
+  if (s.delta < 0.0 || !std::isfinite(s.delta)) throw std::invalid_argument("delta must be >= 0 (0: dt)");
+  if (!(s.zeta > 0.0) || !std::isfinite(s.zeta)) throw std::invalid_argument("zeta must be positive");
+  if (!(s.ode_tolerance > 0.0)) throw std::invalid_argument("ode_tolerance must be positive");
+  if (!(s.activation_distance >= 0.0)) throw std::invalid_argument("activation_distance must be >= 0");
+  makeSolver(s.solver);  // throws on an unknown name
+}
+
+SimulatorData::SimulatorData(const SimulatorModel& sim)
+    : data(sim.model),
+      q(pinocchio::neutral(sim.model)),
+      v(Eigen::VectorXd::Zero(sim.model.nv)),
+      solver(makeSolver(sim.settings.solver)) {
+  const int nv = sim.model.nv;
+  control.kp = Eigen::VectorXd::Zero(nv);
+  control.kd = Eigen::VectorXd::Zero(nv);
+  control.q_target = q;
+  control.v_target = Eigen::VectorXd::Zero(nv);
+  control.tau_ff = Eigen::VectorXd::Zero(nv);
+  gaps = Eigen::VectorXd::Zero(sim.contacts.size());
+  M.resize(nv, nv);
+  J6.resize(6, nv);
+  tau.resize(nv);
+  nle.resize(nv);
+  v_free.resize(nv);
+  dv.resize(nv);
+  candidate_lambda = Eigen::MatrixXd::Zero(3, sim.contacts.size());
+  have_candidate_lambda.assign(sim.contacts.size(), false);
+  anchor_lambda = Eigen::MatrixXd::Zero(3, sim.anchors.size());
+  candidate_states.assign(sim.contacts.size(), ContactState::kOpen);
+}
+
+void computeControl(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
+                    const Eigen::VectorXd& v) {
+  const JointControl& c = sd.control;
+  const int nv = sim.model.nv;
+  if (c.kp.size() != nv || c.kd.size() != nv || c.v_target.size() != nv || c.tau_ff.size() != nv ||
+      c.q_target.size() != sim.model.nq)
+    throw std::invalid_argument("control: kp, kd, v_target, tau_ff need nv = " + std::to_string(nv) +
+                                " entries and q_target nq = " + std::to_string(sim.model.nq));
+  pinocchio::difference(sim.model, q, c.q_target, sd.dv);  // q_target (-) q, on the manifold
+  sd.tau = c.kp.cwiseProduct(sd.dv) + c.kd.cwiseProduct(c.v_target - v) + c.tau_ff;
+}
+
+void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
+                         const Eigen::VectorXd& v, double delta, double zeta) {
+  const pinocchio::Model& model = sim.model;
+  pinocchio::Data& data = sd.data;
+  const auto t0 = Clock::now();
+  // Kinematics with zero acceleration: the classical accelerations it leaves are J' v.
+  pinocchio::forwardKinematics(model, data, q, v, Eigen::VectorXd::Zero(model.nv));
+  pinocchio::computeJointJacobians(model, data);
+
+  // Detection: sphere (or point) against half-space, analytic.
+  sd.active.clear();
+  Eigen::Index rows = 3 * static_cast<Eigen::Index>(sim.anchors.size());
+  // Half-spaces in world coordinates (a body's face moves with its frame).
+  sd.plane_normal.resize(3, sim.halfspaces.size());
+  sd.plane_t1.resize(3, sim.halfspaces.size());
+  sd.plane_t2.resize(3, sim.halfspaces.size());
+  sd.plane_offset.resize(sim.halfspaces.size());
+  for (std::size_t k = 0; k < sim.halfspaces.size(); ++k) {
+    const HalfSpace& h = sim.halfspaces[k];
+    if (h.frame == 0) {
+      sd.plane_normal.col(k) = h.normal;
+      sd.plane_t1.col(k) = h.tangent1;
+      sd.plane_t2.col(k) = h.tangent2;
+      sd.plane_offset[k] = h.offset;
+    } else {
+      const pinocchio::Frame& f = model.frames[h.frame];
+      const pinocchio::SE3 oMf = data.oMi[f.parentJoint] * f.placement;
+      sd.plane_normal.col(k) = oMf.rotation() * h.normal;
+      sd.plane_t1.col(k) = oMf.rotation() * h.tangent1;
+      sd.plane_t2.col(k) = oMf.rotation() * h.tangent2;
+      sd.plane_offset[k] = h.offset + sd.plane_normal.col(k).dot(oMf.translation());
+    }
+  }
+  for (std::size_t i = 0; i < sim.contacts.size(); ++i) {
+    const SphereContact& c = sim.contacts[i];
+    const pinocchio::Frame& f = model.frames[c.frame];
+    const Eigen::Vector3d center = data.oMi[f.parentJoint].act(f.placement.act(c.offset));
+    sd.gaps[i] = sd.plane_normal.col(c.halfspace).dot(center) - sd.plane_offset[c.halfspace] - c.radius;
+    if (sd.gaps[i] <= sim.settings.activation_distance) {
+      sd.active.push_back(static_cast<int>(i));
+      rows += rowsOf(c);
+    }
+  }
+  const int nv = model.nv;
+  if (sd.J.rows() != rows) {  // allocation only when the active set changes size
+    sd.J.resize(rows, nv);
+    sd.b.resize(rows);
+    sd.drift.resize(rows);
+    sd.position_error.resize(rows);
+  }
+  sd.position_error.setZero();
+
+  // Contact frames, Jacobians J (rows t1, t2, n), drifts J' v and gaps Psi.
+  Eigen::Index row = 0;
+  for (int i : sd.active) {
+    const SphereContact& c = sim.contacts[i];
+    const pinocchio::Frame& f = model.frames[c.frame];
+    const HalfSpace& h = sim.halfspaces[c.halfspace];
+    const Eigen::Vector3d n = sd.plane_normal.col(c.halfspace);
+    const Eigen::Vector3d t1 = sd.plane_t1.col(c.halfspace), t2 = sd.plane_t2.col(c.halfspace);
+    const pinocchio::JointIndex j = f.parentJoint;
+    const Eigen::Vector3d center_j = f.placement.act(c.offset);
+    const Eigen::Vector3d point_w = data.oMi[j].act(center_j) - c.radius * n;
+    const pinocchio::SE3 at_point(Eigen::Matrix3d::Identity(), data.oMi[j].actInv(point_w));
+    sd.J6.setZero();
+    pinocchio::getFrameJacobian(model, data, j, at_point, pinocchio::LOCAL_WORLD_ALIGNED, sd.J6);
+    // Tangential rows: the material point at the contact (slip velocity); normal
+    // row: the sphere's centre, whose normal motion is exactly the gap's.
+    Eigen::Vector3d acc_point =
+        pinocchio::getFrameClassicalAcceleration(model, data, j, at_point, pinocchio::LOCAL_WORLD_ALIGNED).linear();
+    const pinocchio::SE3 at_center(Eigen::Matrix3d::Identity(), center_j);
+    Eigen::Vector3d acc_center =
+        pinocchio::getFrameClassicalAcceleration(model, data, j, at_center, pinocchio::LOCAL_WORLD_ALIGNED).linear();
+    sd.Jrel = sd.J6.topRows<3>();
+    if (h.frame != 0) {
+      // A body's face: velocities relative to the face's material point at the
+      // contact. (The face's rotation adds terms of order |omega| |v_rel| to the
+      // drift that are left out; the position term corrects what they would.)
+      const pinocchio::JointIndex jp = model.frames[h.frame].parentJoint;
+      const pinocchio::SE3 plane_at_point(Eigen::Matrix3d::Identity(), data.oMi[jp].actInv(point_w));
+      sd.J6.setZero();
+      pinocchio::getFrameJacobian(model, data, jp, plane_at_point, pinocchio::LOCAL_WORLD_ALIGNED, sd.J6);
+      sd.Jrel -= sd.J6.topRows<3>();
+      const Eigen::Vector3d acc_plane = pinocchio::getFrameClassicalAcceleration(
+          model, data, jp, plane_at_point, pinocchio::LOCAL_WORLD_ALIGNED).linear();
+      acc_point -= acc_plane;
+      acc_center -= acc_plane;
+    }
+    sd.J.row(row) = t1.transpose() * sd.Jrel;
+    sd.drift[row] = t1.dot(acc_point);
+    ++row;
+    if (!c.planar) {
+      sd.J.row(row) = t2.transpose() * sd.Jrel;
+      sd.drift[row] = t2.dot(acc_point);
+      ++row;
+    }
+    sd.J.row(row) = n.transpose() * sd.Jrel;
+    sd.drift[row] = n.dot(acc_center);
+    sd.position_error[row] = sd.gaps[i];
+    ++row;
+  }
+  for (const PointAnchor& a : sim.anchors) {
+    const pinocchio::Frame& f = model.frames[a.frame];
+    const pinocchio::JointIndex j = f.parentJoint;
+    const Eigen::Vector3d point_j = f.placement.act(a.offset);
+    const pinocchio::SE3 at_point(Eigen::Matrix3d::Identity(), point_j);
+    sd.J6.setZero();
+    pinocchio::getFrameJacobian(model, data, j, at_point, pinocchio::LOCAL_WORLD_ALIGNED, sd.J6);
+    sd.J.middleRows(row, 3) = sd.J6.topRows<3>();
+    sd.drift.segment<3>(row) =
+        pinocchio::getFrameClassicalAcceleration(model, data, j, at_point, pinocchio::LOCAL_WORLD_ALIGNED).linear();
+    sd.position_error.segment<3>(row) = data.oMi[j].act(point_j) - a.target;
+    row += 3;
+  }
+  const auto t1 = Clock::now();
+
+  // Dynamics: M (crba) and its Cholesky, nle = C v + g, tau, A = J M^-1 J^T (eq. 22).
+  pinocchio::crba(model, data, q, pinocchio::Convention::WORLD);
+  sd.M = data.M;
+  sd.M.triangularView<Eigen::StrictlyLower>() = sd.M.transpose().triangularView<Eigen::StrictlyLower>();
+  sd.llt.compute(sd.M);
+  if (sd.llt.info() != Eigen::Success)
+    throw std::runtime_error("the mass matrix is not positive definite at this configuration");
+  sd.nle = pinocchio::nonLinearEffects(model, data, q, v);
+  computeControl(sim, sd, q, v);
+  sd.v_free = sd.llt.solve(sd.tau - sd.nle);  // M^-1 (tau - nle): the free acceleration
+  sd.MinvJt = sd.llt.solve(sd.J.transpose());
+  sd.A.noalias() = sd.J * sd.MinvJt;
+  sd.A = 0.5 * (sd.A + sd.A.transpose()).eval();
+  // eq. 27 with Phi = nle - tau: b = J M^-1 Phi - J' v - (2 zeta / delta) J v - Psi / delta^2
+  sd.b.noalias() = -sd.J * sd.v_free;
+  sd.b -= sd.drift;
+  sd.b.noalias() -= (2.0 * zeta / delta) * (sd.J * v);
+  sd.b -= sd.position_error / (delta * delta);
+  const auto t2 = Clock::now();
+  sd.timings.kinematics += microseconds(t0, t1);
+  sd.timings.delassus += microseconds(t1, t2);
+}
+
+namespace {
+
+// Solve eq. 65 for the current sd.A, sd.b (scaled by `scale`: h for impulses),
+// warm-started from the previous solution of the same candidates.
+void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
+  const auto t0 = Clock::now();
+  const Eigen::Index rows = sd.J.rows();
+  // Rebuild the problem only when the active set changed.
+  if (!sd.problem || sd.active != sd.problem_active) {
+    std::vector<Constraint> cons;
+    for (int i : sd.active) {
+      const SphereContact& c = sim.contacts[i];
+      cons.push_back(c.planar ? Constraint::planarFriction(c.mu) : Constraint::spatialFriction(c.mu));
+    }
+    for (std::size_t a = 0; a < sim.anchors.size(); ++a) cons.push_back(Constraint::bilateral(3));
+    sd.delassus = std::make_shared<DenseDelassus>(sd.A);
+    sd.problem = std::make_unique<ContactProblem>(sd.delassus, scale * sd.b, std::move(cons), 1e-6);
+    sd.problem_active = sd.active;
+  } else {
+    sd.delassus->matrix() = sd.A;
+    sd.problem->setB(scale * sd.b);
+  }
+  if (!sd.A.allFinite() || !sd.b.allFinite())
+    throw std::runtime_error("non-finite Delassus operator or right-hand side at t = " + std::to_string(sd.t));
+  // Warm start: the last lambda of each candidate that is active again.
+  SolverSettings settings = sim.settings.solver_settings;
+  sd.guess.resize(rows);
+  bool any = false;
+  Eigen::Index row = 0;
+  for (int i : sd.active) {
+    const int k = rowsOf(sim.contacts[i]);
+    if (sd.have_candidate_lambda[i]) {
+      any = true;
+      if (k == 3)
+        sd.guess.segment<3>(row) = scale * sd.candidate_lambda.col(i);
+      else
+        sd.guess.segment<2>(row) << scale * sd.candidate_lambda(0, i), scale * sd.candidate_lambda(2, i);
+    } else {
+      sd.guess.segment(row, k).setZero();
+    }
+    row += k;
+  }
+  for (std::size_t a = 0; a < sim.anchors.size(); ++a, row += 3) {
+    sd.guess.segment<3>(row) = scale * sd.anchor_lambda.col(a);
+    any = any || sd.anchor_lambda.col(a).squaredNorm() > 0.0;
+  }
+  settings.warm_start = sim.settings.warm_start && any ? WarmStart::kGiven : WarmStart::kNone;
+  solve(*sd.problem, *sd.solver, settings, sd.result, &sd.guess);
+  if (!sd.result.lam.allFinite())
+    throw std::runtime_error("contact solve returned non-finite impulses at t = " + std::to_string(sd.t));
+  // Per-candidate forces (lambda / scale) and states.
+  sd.lambda = sd.result.lam / scale;
+  for (std::size_t i = 0; i < sim.contacts.size(); ++i) {
+    sd.candidate_lambda.col(i).setZero();
+    sd.have_candidate_lambda[i] = false;
+    sd.candidate_states[i] = ContactState::kOpen;
+  }
+  row = 0;
+  for (std::size_t blk = 0; blk < sd.active.size(); ++blk) {
+    const int i = sd.active[blk];
+    const int k = rowsOf(sim.contacts[i]);
+    if (k == 3)
+      sd.candidate_lambda.col(i) = sd.lambda.segment<3>(row);
+    else
+      sd.candidate_lambda.col(i) << sd.lambda[row], 0.0, sd.lambda[row + 1];
+    sd.have_candidate_lambda[i] = true;
+    sd.candidate_states[i] = sd.result.states[blk];
+    row += k;
+  }
+  for (std::size_t a = 0; a < sim.anchors.size(); ++a, row += 3)
+    sd.anchor_lambda.col(a) = sd.lambda.segment<3>(row);
+  sd.timings.solve += microseconds(t0, Clock::now());
+  ++sd.solves;
+  sd.max_residual_step = std::max(sd.max_residual_step, sd.result.residual);
+  sd.all_converged_step = sd.all_converged_step && sd.result.converged;
+  sd.iterations_step += sd.result.iterations;
+}
+
+// The acceleration of the relaxed DAI (eq. 39 with lambda from eq. 65) at (q, v).
+void acceleration(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
+                  const Eigen::VectorXd& v, Eigen::VectorXd& a) {
+  const double delta = sim.settings.delta > 0.0 ? sim.settings.delta : sim.settings.dt;
+  buildContactProblem(sim, sd, q, v, delta, sim.settings.zeta);
+  solveContacts(sim, sd, 1.0);
+  a = sd.v_free;  // M^-1 (tau - nle)
+  if (sd.J.rows() > 0) a.noalias() += sd.MinvJt * sd.lambda;
+  ++sd.rhs_evaluations;
+}
+
+void checkState(const SimulatorData& sd) {
+  if (!sd.q.allFinite() || !sd.v.allFinite()) {
+    std::ostringstream os;
+    os << "simulation diverged: non-finite state at t = " << sd.t;
+    throw std::runtime_error(os.str());
+  }
+}
+
+void stepTimeStepping(const SimulatorModel& sim, SimulatorData& sd) {
+  const double h = sim.settings.dt;
+  // eq. 70: delta = h, zeta = 1/2; impulses P = h lambda solve A P - h b in -N(P).
+  buildContactProblem(sim, sd, sd.q, sd.v, h, 0.5);
+  solveContacts(sim, sd, h);
+  const auto t0 = Clock::now();
+  sd.v += h * sd.v_free;  // v_free = v + h M^-1 (tau - nle)
+  if (sd.J.rows() > 0) sd.v.noalias() += sd.MinvJt * sd.result.lam;
+  sd.q_tmp = pinocchio::integrate(sim.model, sd.q, h * sd.v);  // symplectic: uses v+
+  sd.q = sd.q_tmp;
+  sd.t += h;
+  sd.last_dt = h;
+  sd.timings.integrate += microseconds(t0, Clock::now());
+}
+
+void stepRK4(const SimulatorModel& sim, SimulatorData& sd) {
+  const double h = sim.settings.dt;
+  auto& V = sd.stage_v;
+  auto& Acc = sd.stage_a;
+  V.resize(4);
+  Acc.resize(4);
+  const Eigen::VectorXd q0 = sd.q, v0 = sd.v;
+  static const double c[4] = {0.0, 0.5, 0.5, 1.0};
+  for (int s = 0; s < 4; ++s) {
+    if (s == 0) {
+      sd.q_tmp = q0;
+      V[0] = v0;
+    } else {
+      sd.q_tmp = pinocchio::integrate(sim.model, q0, c[s] * h * V[s - 1]);
+      V[s] = v0 + c[s] * h * Acc[s - 1];
+    }
+    acceleration(sim, sd, sd.q_tmp, V[s], Acc[s]);
+  }
+  const auto t0 = Clock::now();
+  sd.v = v0 + (h / 6.0) * (Acc[0] + 2.0 * Acc[1] + 2.0 * Acc[2] + Acc[3]);
+  sd.q = pinocchio::integrate(sim.model, q0, (h / 6.0) * (V[0] + 2.0 * V[1] + 2.0 * V[2] + V[3]));
+  sd.t += h;
+  sd.last_dt = h;
+  sd.timings.integrate += microseconds(t0, Clock::now());
+}
+
+// Bogacki-Shampine 3(2) with error control on (q, v); q-increments are tangent
+// vectors at the step's start, so the error of q is a difference of increments.
+void stepAdaptive(const SimulatorModel& sim, SimulatorData& sd) {
+  const SimulatorSettings& s = sim.settings;
+  double h = sd.next_dt > 0.0 ? std::min(sd.next_dt, s.dt) : s.dt;
+  auto& V = sd.stage_v;
+  auto& Acc = sd.stage_a;
+  V.resize(4);
+  Acc.resize(4);
+  const Eigen::VectorXd q0 = sd.q, v0 = sd.v;
+  for (int attempt = 0;; ++attempt) {
+    if (h < s.min_dt)
+      throw std::runtime_error("adaptive integration: step size fell below min_dt at t = " + std::to_string(sd.t));
+    V[0] = v0;
+    acceleration(sim, sd, q0, V[0], Acc[0]);
+    V[1] = v0 + 0.5 * h * Acc[0];
+    sd.q_tmp = pinocchio::integrate(sim.model, q0, 0.5 * h * V[0]);
+    acceleration(sim, sd, sd.q_tmp, V[1], Acc[1]);
+    V[2] = v0 + 0.75 * h * Acc[1];
+    sd.q_tmp = pinocchio::integrate(sim.model, q0, 0.75 * h * V[1]);
+    acceleration(sim, sd, sd.q_tmp, V[2], Acc[2]);
+    const Eigen::VectorXd dq3 = h * ((2.0 / 9.0) * V[0] + (1.0 / 3.0) * V[1] + (4.0 / 9.0) * V[2]);
+    const Eigen::VectorXd v3 = v0 + h * ((2.0 / 9.0) * Acc[0] + (1.0 / 3.0) * Acc[1] + (4.0 / 9.0) * Acc[2]);
+    const Eigen::VectorXd q3 = pinocchio::integrate(sim.model, q0, dq3);
+    V[3] = v3;
+    acceleration(sim, sd, q3, V[3], Acc[3]);
+    const Eigen::VectorXd dq2 =
+        h * ((7.0 / 24.0) * V[0] + 0.25 * V[1] + (1.0 / 3.0) * V[2] + 0.125 * V[3]);
+    const Eigen::VectorXd v2 =
+        v0 + h * ((7.0 / 24.0) * Acc[0] + 0.25 * Acc[1] + (1.0 / 3.0) * Acc[2] + 0.125 * Acc[3]);
+    // error per unit of the state, mixed absolute/relative
+    const double eq = ((dq3 - dq2).array() / (s.ode_tolerance * (1.0 + dq3.array().abs()))).abs().maxCoeff();
+    const double ev = ((v3 - v2).array() / (s.ode_tolerance * (1.0 + v3.array().abs()))).abs().maxCoeff();
+    const double err = std::max(eq, ev);
+    const double factor = err > 0.0 ? std::clamp(0.9 * std::pow(err, -1.0 / 3.0), 0.2, 5.0) : 5.0;
+    if (err <= 1.0 && std::isfinite(err)) {
+      sd.q = q3;
+      sd.v = v3;
+      sd.t += h;
+      sd.last_dt = h;
+      sd.next_dt = std::min(s.dt, h * factor);
+      return;
+    }
+    h *= std::isfinite(err) ? factor : 0.2;
+  }
+}
+
+}  // namespace
+
+void step(const SimulatorModel& sim, SimulatorData& sd) {
+  const auto t0 = Clock::now();
+  sd.timings = StepTimings{};
+  sd.rhs_evaluations = 0;
+  sd.solves = 0;
+  sd.iterations_step = 0;
+  sd.max_residual_step = 0.0;
+  sd.all_converged_step = true;
+  if (sd.q.size() != sim.model.nq || sd.v.size() != sim.model.nv)
+    throw std::invalid_argument("state size: q needs nq = " + std::to_string(sim.model.nq) +
+                                " entries and v nv = " + std::to_string(sim.model.nv));
+  switch (sim.settings.mode) {
+    case IntegrationMode::kTimeStepping: stepTimeStepping(sim, sd); break;
+    case IntegrationMode::kRK4: stepRK4(sim, sd); break;
+    case IntegrationMode::kAdaptive: stepAdaptive(sim, sd); break;
+  }
+  checkState(sd);
+  sd.timings.total = microseconds(t0, Clock::now());
+}
+
+}  // namespace stiction

@@ -1,0 +1,271 @@
+"""Scenes: a robot or rigid bodies, a ground (slope, friction), the contacts the scene needs,
+the initial state and the control. Every scene is a TOML file in ``robots/scenes/``.
+
+A slope of angle θ is modelled by tilting gravity, g = 9.81 (sin θ, 0, -cos θ): the ground stays
+the plane z = 0 and "downhill" is +x. Recordings rotate the picture back.
+
+Keys (all optional unless stated):
+
+    name, description
+    robot = "solo12"                      # a name of stiction.robots.ROBOTS, or
+    urdf = "cube.urdf"                    # a URDF path (relative to robots/), with free_flyer = true
+    bodies = ["cube.urdf", "cube.urdf"]   # several free-flying URDF bodies, stacked in the listed order
+    duration, dt, settle_time             # seconds
+    mode = "timestep" | "rk4" | "adaptive"; delta, zeta (ODE modes)
+    [ground]   slope_deg, mu
+    [contacts] feet = true (the robot's foot spheres), radius, box_corners = true (URDF box visuals)
+    [control]  kp, kd (joint PD towards the initial posture), lock_joints = true (a rigid robot)
+    [initial]  base_velocity = [vx, vy, vz, wx, wy, wz], base_xy = [x, y], drop = 0.0 (m above touch)
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from . import _core
+from .robots import ROBOTS, load_robot, load_urdf
+
+SCENES_DIR = Path(__file__).resolve().parents[2] / "robots" / "scenes"
+ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
+GRAVITY = 9.81
+
+
+@dataclass
+class Scene:
+    """A loaded scene: everything the simulator needs, plus what the summary reports."""
+
+    name: str
+    description: str
+    model: pin.Model
+    visual_model: pin.GeometryModel
+    halfspaces: list
+    contacts: list
+    anchors: list
+    q0: np.ndarray
+    v0: np.ndarray
+    kp: np.ndarray
+    kd: np.ndarray
+    duration: float
+    dt: float
+    settle_time: float
+    mode: str
+    delta: float
+    zeta: float
+    slope_deg: float
+    mu: float
+    config: dict = field(default_factory=dict)
+
+    @property
+    def slope(self) -> float:
+        return math.radians(self.slope_deg)
+
+    def settings(self, **overrides) -> _core.SimulatorSettings:
+        s = _core.SimulatorSettings()
+        s.dt = overrides.get("dt", self.dt)
+        mode = overrides.get("mode", self.mode)
+        modes = {"timestep": _core.IntegrationMode.timestep, "rk4": _core.IntegrationMode.rk4,
+                 "adaptive": _core.IntegrationMode.adaptive, "ode": _core.IntegrationMode.rk4}
+        if mode not in modes:
+            raise ValueError(f"unknown integration mode {mode!r} (timestep, rk4, adaptive, ode)")
+        s.mode = modes[mode]
+        s.delta = overrides.get("delta", self.delta)
+        s.zeta = overrides.get("zeta", self.zeta)
+        s.tolerance = overrides.get("tolerance", 1e-10)
+        s.max_iterations = overrides.get("max_iterations", 200)
+        s.solver = overrides.get("solver", "default")
+        if "ode_tolerance" in overrides:
+            s.ode_tolerance = overrides["ode_tolerance"]
+        return s
+
+
+def list_scenes() -> list[str]:
+    return sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
+
+
+def _resolve(path: str) -> Path:
+    p = Path(path)
+    for candidate in (p, ROBOTS_DIR / p):
+        if candidate.is_file():
+            return candidate
+    raise FileNotFoundError(f"{path}: not found (relative paths are looked up in {ROBOTS_DIR})")
+
+
+def _box_half_extents(visual_model: pin.GeometryModel, frame_name: str) -> np.ndarray | None:
+    import coal
+
+    for go in visual_model.geometryObjects:
+        if isinstance(go.geometry, coal.Box):
+            return np.asarray(go.geometry.halfSide, dtype=float)
+    return None
+
+
+def _halfspace(name: str, normal, offset: float, frame: int = 0) -> _core.HalfSpace:
+    h = _core.HalfSpace()
+    h.name, h.normal, h.offset, h.frame = name, np.asarray(normal, dtype=float), float(offset), int(frame)
+    return h
+
+
+def _sphere(name: str, frame: int, offset, radius: float, halfspace: int, mu: float) -> _core.SphereContact:
+    c = _core.SphereContact()
+    c.name, c.frame, c.offset, c.radius, c.halfspace, c.mu = name, int(frame), np.asarray(offset, float), float(radius), int(halfspace), float(mu)
+    return c
+
+
+def _corners(half: np.ndarray, z_sign: float | None = None):
+    out = []
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            for sz in (-1, 1):
+                if z_sign is None or sz == z_sign:
+                    out.append(np.array([sx, sy, sz]) * half)
+    return out
+
+
+def load_scene(name_or_path: str) -> Scene:
+    """A scene by name (a file of robots/scenes/) or by path to a TOML file."""
+    p = Path(name_or_path)
+    if not p.suffix:
+        p = SCENES_DIR / f"{name_or_path}.toml"
+    if not p.is_file():
+        raise ValueError(f"unknown scene {name_or_path!r}; known: {', '.join(list_scenes())}")
+    with open(p, "rb") as fh:
+        cfg = tomllib.load(fh)
+    return build_scene(cfg, default_name=p.stem)
+
+
+def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
+    ground = cfg.get("ground", {})
+    slope_deg = float(ground.get("slope_deg", 0.0))
+    mu = float(ground.get("mu", 0.5))
+    if mu < 0:
+        raise ValueError(f"ground mu must be >= 0, got {mu}")
+    contacts_cfg = cfg.get("contacts", {})
+    control = cfg.get("control", {})
+    initial = cfg.get("initial", {})
+
+    halfspaces = [_halfspace("ground", (0, 0, 1), 0.0)]
+    contacts: list = []
+    if "robot" in cfg or "urdf" in cfg:
+        robot = (load_robot(cfg["robot"]) if "robot" in cfg
+                 else load_urdf(_resolve(cfg["urdf"]), bool(cfg.get("free_flyer", True))))
+        model, visual, q0 = robot.model, robot.visual_model, robot.q0.copy()
+        spec = robot.spec
+        if control.get("lock_joints", False) and model.njoints > 2:
+            # A rigid robot: every joint but the free flyer held at its initial value.
+            lock = list(range(2, model.njoints))
+            visual_red = pin.GeometryModel()
+            model, visual = pin.buildReducedModel(model, visual, lock, q0)
+            q0 = q0[:7].copy()
+        if contacts_cfg.get("feet", spec is not None and bool(spec.feet)):
+            if spec is None or not spec.feet:
+                raise ValueError("contacts.feet: this robot has no foot frames; list them with contacts.frames")
+            radius = float(contacts_cfg.get("radius", spec.foot_radius))
+            for f in spec.feet:
+                contacts.append(_sphere(f, model.getFrameId(f), (0, 0, 0), radius, 0, mu))
+        for frame_name in contacts_cfg.get("frames", []):
+            if not model.existFrame(frame_name):
+                raise ValueError(f"contacts.frames: no frame {frame_name!r} in the model")
+            contacts.append(_sphere(frame_name, model.getFrameId(frame_name), (0, 0, 0),
+                                    float(contacts_cfg.get("radius", 0.0)), 0, mu))
+        if spec is not None and spec.points and contacts_cfg.get("soles", True):
+            for frame_name, offset in spec.points:
+                contacts.append(_sphere(f"{frame_name}{offset}", model.getFrameId(frame_name), offset, 0.0, 0, mu))
+        if contacts_cfg.get("box_corners", False):
+            half = _box_half_extents(visual, "")
+            if half is None:
+                raise ValueError("contacts.box_corners: the URDF has no box visual")
+            frame = model.getFrameId(model.names[1]) if model.njoints > 1 else 0
+            body_frame = next(i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY)
+            for k, corner in enumerate(_corners(half)):
+                contacts.append(_sphere(f"corner{k}", body_frame, corner, 0.0, 0, mu))
+    elif "bodies" in cfg:
+        model, visual, q0, contacts, halfspaces = _stacked_bodies(cfg["bodies"], mu, halfspaces)
+    else:
+        raise ValueError("a scene needs `robot`, `urdf` or `bodies`")
+
+    for wall in cfg.get("walls", []):
+        halfspaces.append(_halfspace(wall.get("name", f"wall{len(halfspaces)}"), wall["normal"], wall["offset"]))
+        for frame_name in wall.get("frames", []):
+            if not model.existFrame(frame_name):
+                raise ValueError(f"walls.frames: no frame {frame_name!r} in the model")
+            contacts.append(_sphere(f"{frame_name}-{wall.get('name', 'wall')}", model.getFrameId(frame_name),
+                                    wall.get("offset_in_frame", (0, 0, 0)), float(wall.get("radius", 0.0)),
+                                    len(halfspaces) - 1, float(wall.get("mu", mu))))
+
+    # Tilted gravity models the slope (downhill = +x).
+    th = math.radians(slope_deg)
+    model.gravity = pin.Motion(np.array([GRAVITY * math.sin(th), 0.0, -GRAVITY * math.cos(th)]), np.zeros(3))
+
+    free = model.joints[1].shortname() == "JointModelFreeFlyer" if model.njoints > 1 else False
+    v0 = np.zeros(model.nv)
+    if free and "bodies" not in cfg:
+        q0[:2] = initial.get("base_xy", [0.0, 0.0])
+        # lower (or raise) the base so the lowest contact touches z = 0, plus `drop`
+        data = model.createData()
+        pin.framesForwardKinematics(model, data, q0)
+        lowest = min((data.oMf[c.frame].act(c.offset)[2] - c.radius for c in contacts if c.halfspace == 0),
+                     default=0.0)
+        q0[2] += -lowest + float(initial.get("drop", 0.0))
+        v0[:6] = initial.get("base_velocity", [0.0] * 6)
+    elif "bodies" in cfg and "top_velocity" in initial:
+        v0[6:12] = initial["top_velocity"]
+    if "base_velocity" in initial and "bodies" in cfg:
+        v0[:6] = initial["base_velocity"]
+
+    kp = np.zeros(model.nv)
+    kd = np.zeros(model.nv)
+    start = 6 if free else 0
+    kp[start:] = float(control.get("kp", 0.0))
+    kd[start:] = float(control.get("kd", 0.0))
+
+    dt = float(cfg.get("dt", 1e-3))
+    return Scene(
+        name=cfg.get("name", default_name), description=cfg.get("description", ""), model=model,
+        visual_model=visual, halfspaces=halfspaces, contacts=contacts, anchors=[], q0=q0, v0=v0, kp=kp, kd=kd,
+        duration=float(cfg.get("duration", 2.0)), dt=dt, settle_time=float(cfg.get("settle_time", 0.0)),
+        mode=cfg.get("mode", "timestep"), delta=float(cfg.get("delta", 0.0)), zeta=float(cfg.get("zeta", 0.5)),
+        slope_deg=slope_deg, mu=mu, config=cfg)
+
+
+def _stacked_bodies(paths: list[str], mu: float, halfspaces: list):
+    """Free-flying URDF boxes stacked on the ground in the listed order: each box's
+    bottom corners touch the ground (the first) or the top face of the box below."""
+    model = pin.Model()
+    visual = pin.GeometryModel()
+    contacts = []
+    q_parts = []
+    z = 0.0
+    below_frame = None
+    below_half = None
+    for k, path in enumerate(paths):
+        body = load_urdf(_resolve(path), True, name=f"body{k}")
+        half = _box_half_extents(body.visual_model, "")
+        if half is None:
+            raise ValueError(f"{path}: stacked bodies must be boxes")
+        # prefix names so several copies can coexist
+        for f in body.model.frames:
+            f.name = f"{f.name}_{k}" if f.name != "universe" else f.name
+        names = list(body.model.names)
+        for j in range(1, len(names)):
+            body.model.names[j] = f"{names[j]}_{k}"
+        for go in body.visual_model.geometryObjects:
+            go.name = f"{go.name}_{k}"
+        model, visual = pin.appendModel(model, body.model, visual, body.visual_model, 0, pin.SE3.Identity())
+        body_frame = max(i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY)
+        if below_frame is None:
+            target = 0
+        else:
+            halfspaces.append(_halfspace(f"top of body{k - 1}", (0, 0, 1), float(below_half[2]), below_frame))
+            target = len(halfspaces) - 1
+        for c, corner in enumerate(_corners(half, z_sign=-1)):
+            contacts.append(_sphere(f"body{k}-corner{c}", body_frame, corner, 0.0, target, mu))
+        z += half[2]
+        q_parts.append(np.array([0.0, 0.0, z, 0.0, 0.0, 0.0, 1.0]))
+        z += half[2]
+        below_frame, below_half = body_frame, half
+    return model, visual, np.concatenate(q_parts), contacts, halfspaces
