@@ -78,6 +78,7 @@ Eigen::MatrixXd get_M(const SimulatorData& d) { return d.M; }
 Eigen::VectorXd get_tau(const SimulatorData& d) { return d.tau; }
 Eigen::MatrixXd get_candidate_lambda(const SimulatorData& d) { return d.candidate_lambda; }
 Eigen::MatrixXd get_anchor_lambda(const SimulatorData& d) { return d.anchor_lambda; }
+Eigen::MatrixXd get_candidate_velocity(const SimulatorData& d) { return d.candidate_velocity; }
 SolverResult get_result(const SimulatorData& d) { return d.result; }
 bp::list get_active(const SimulatorData& d) {
   bp::list out;
@@ -118,13 +119,14 @@ bp::dict rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int e
   const int na = static_cast<int>(sim.anchors.size());
   Eigen::VectorXd t(records), residual(records), iterations(records), converged(records), dts(records);
   Eigen::MatrixXd q(records, sim.model.nq), v(records, sim.model.nv), lam(records, 3 * nc), gaps(records, nc),
-      states(records, nc), anchors(records, 3 * na), timings(records, 5);
+      states(records, nc), anchors(records, 3 * na), timings(records, 5), vel(records, 3 * nc);
   auto record = [&](int r) {
     t[r] = d.t;
     q.row(r) = d.q.transpose();
     v.row(r) = d.v.transpose();
     for (int i = 0; i < nc; ++i) {
       lam.block<1, 3>(r, 3 * i) = d.candidate_lambda.col(i).transpose();
+      vel.block<1, 3>(r, 3 * i) = d.candidate_velocity.col(i).transpose();
       states(r, i) = static_cast<int>(d.candidate_states[i]);
     }
     gaps.row(r) = d.gaps.transpose();
@@ -147,6 +149,7 @@ bp::dict rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int e
   out["q"] = q;
   out["v"] = v;
   out["lam"] = lam;
+  out["contact_velocity"] = vel;
   out["gaps"] = gaps;
   out["states"] = states;
   out["anchor_lam"] = anchors;
@@ -263,6 +266,7 @@ void exposeSimulator() {
       .add_property("active", &get_active)
       .add_property("candidate_lambda", &get_candidate_lambda)
       .add_property("anchor_lambda", &get_anchor_lambda)
+      .add_property("contact_velocity", &get_candidate_velocity, "3 x candidates: J v after the step")
       .add_property("states", &get_states)
       .add_property("result", &get_result)
       .add_property("timings", &get_timings)

@@ -103,6 +103,7 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
   candidate_lambda = Eigen::MatrixXd::Zero(3, sim.contacts.size());
   have_candidate_lambda.assign(sim.contacts.size(), false);
   anchor_lambda = Eigen::MatrixXd::Zero(3, sim.anchors.size());
+  candidate_velocity = Eigen::MatrixXd::Zero(3, sim.contacts.size());
   candidate_states.assign(sim.contacts.size(), ContactState::kOpen);
 }
 
@@ -461,6 +462,22 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
     case IntegrationMode::kAdaptive: stepAdaptive(sim, sd); break;
   }
   checkState(sd);
+  // Post-step contact velocities J v (rows t1, t2, n) per active candidate, with
+  // the last Jacobian (time stepping: exactly the velocity the solve imposed).
+  sd.candidate_velocity.setZero();
+  if (sd.J.rows() > 0) {
+    sd.row_velocity.noalias() = sd.J * sd.v;
+    Eigen::Index row = 0;
+    for (int i : sd.active) {
+      if (sim.contacts[i].planar) {
+        sd.candidate_velocity.col(i) << sd.row_velocity[row], 0.0, sd.row_velocity[row + 1];
+        row += 2;
+      } else {
+        sd.candidate_velocity.col(i) = sd.row_velocity.segment<3>(row);
+        row += 3;
+      }
+    }
+  }
   sd.timings.total = microseconds(t0, Clock::now());
 }
 

@@ -135,6 +135,7 @@ class SimulatorData {
   std::vector<bool> have_candidate_lambda;
   std::vector<ContactState> candidate_states;
   Eigen::MatrixXd anchor_lambda;     ///< 3 x anchors
+  Eigen::MatrixXd candidate_velocity;  ///< 3 x candidates, contact velocity J v after the step
 
   // Statistics of the last step (ODE modes solve once per right-hand side).
   StepTimings timings;
@@ -151,7 +152,7 @@ class SimulatorData {
   Eigen::Matrix3Xd plane_normal, plane_t1, plane_t2;  ///< world axes of each half-space
   Eigen::VectorXd plane_offset;
   Eigen::LLT<Eigen::MatrixXd> llt;
-  Eigen::VectorXd tau, nle, v_free, dv, guess, q_tmp;
+  Eigen::VectorXd tau, nle, v_free, dv, guess, q_tmp, row_velocity;
   std::shared_ptr<DenseDelassus> delassus;
   std::unique_ptr<ContactProblem> problem;
   std::vector<int> problem_active;
