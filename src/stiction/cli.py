@@ -107,6 +107,55 @@ def cmd_demo(args) -> int:
     return 0 if ok == len(rows) else 1
 
 
+def cmd_scenes(args) -> int:
+    from .scene import SCENES_DIR, list_scenes
+    import tomllib
+
+    for name in list_scenes():
+        with open(SCENES_DIR / f"{name}.toml", "rb") as fh:
+            desc = tomllib.load(fh).get("description", "")
+        print(f"{name:22s} {desc}")
+    return 0
+
+
+def cmd_simulate(args) -> int:
+    from .simulator import Simulator
+
+    overrides = {}
+    if args.dt is not None:
+        overrides["dt"] = args.dt
+    if args.mode is not None:
+        overrides["mode"] = args.mode
+    if args.delta is not None:
+        overrides["delta"] = args.delta
+    if args.zeta is not None:
+        overrides["zeta"] = args.zeta
+    sim = Simulator(args.scene, **overrides)
+    traj = sim.rollout(args.duration)
+    summary = sim.summary(traj)
+    if args.save:
+        traj.save(args.save)
+        summary["trajectory"] = args.save
+    if args.record:
+        from .recording import record_html
+
+        info = record_html(sim, traj, args.record)
+        summary["recording"] = args.record
+        summary["recording_info"] = info
+    if args.plot:
+        from .plots import plot_trajectory
+
+        plot_trajectory(sim, traj, args.plot)
+        summary["plot"] = args.plot
+    if args.json:
+        json.dump(summary, sys.stdout, indent=1)
+        sys.stdout.write("\n")
+    else:
+        for key, val in summary.items():
+            print(f"{key:38s} {val}")
+    return 0 if summary["all_converged"] else 1
+
+
 def cmd_solvers(args) -> int:
     for name in solver_names():
         print(name)
@@ -132,6 +181,23 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--solver", default="default", choices=solver_names())
     p.add_argument("--tol", type=float, default=1e-10)
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("simulate", help="simulate a scene (see `stiction scenes`)")
+    p.add_argument("scene", help="a scene name or a TOML file")
+    p.add_argument("--duration", type=float, help="seconds (default: the scene's)")
+    p.add_argument("--dt", type=float, help="time step (default: the scene's)")
+    p.add_argument("--mode", choices=["timestep", "ode", "rk4", "adaptive"],
+                   help="time stepping (eq. 70) or the relaxed DAI as an ODE (eq. 39 + 64): rk4 (= ode) or adaptive")
+    p.add_argument("--delta", type=float, help="ODE modes: Baumgarte delta (default dt)")
+    p.add_argument("--zeta", type=float, help="ODE modes: Baumgarte zeta (default 0.5)")
+    p.add_argument("--record", metavar="FILE.html", help="write a self-contained meshcat recording")
+    p.add_argument("--plot", metavar="FILE.png", help="plot base position, foot slip, contact forces")
+    p.add_argument("--save", metavar="FILE.npz", help="save the trajectory")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("scenes", help="list the bundled scenes")
+    p.set_defaults(func=cmd_scenes)
 
     p = sub.add_parser("solvers", help="list the solver names")
     p.set_defaults(func=cmd_solvers)

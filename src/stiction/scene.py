@@ -14,8 +14,12 @@ Keys (all optional unless stated):
     mode = "timestep" | "rk4" | "adaptive"; delta, zeta (ODE modes)
     [ground]   slope_deg, mu
     [contacts] feet = true (the robot's foot spheres), radius, box_corners = true (URDF box visuals)
-    [control]  kp, kd (joint PD towards the initial posture), lock_joints = true (a rigid robot)
-    [initial]  base_velocity = [vx, vy, vz, wx, wy, wz], base_xy = [x, y], drop = 0.0 (m above touch)
+    [control]  kp, kd (joint PD towards the initial posture, or q_target = [...]),
+               gravity_feedforward = true (tau_ff = g(q_target)), lock_joints = true (a rigid robot)
+    [initial]  q = [...] (full configuration), base_velocity = [vx, vy, vz, wx, wy, wz],
+               base_xy = [x, y], drop = 0.0 (m above touch)
+    [[walls]]  name, normal, offset (free space: normal . x >= offset), frames (spheres on them),
+               radius, mu
 """
 from __future__ import annotations
 
@@ -50,6 +54,8 @@ class Scene:
     v0: np.ndarray
     kp: np.ndarray
     kd: np.ndarray
+    q_target: np.ndarray
+    tau_ff: np.ndarray
     duration: float
     dt: float
     settle_time: float
@@ -155,10 +161,13 @@ def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
                  else load_urdf(_resolve(cfg["urdf"]), bool(cfg.get("free_flyer", True))))
         model, visual, q0 = robot.model, robot.visual_model, robot.q0.copy()
         spec = robot.spec
+        if "q" in initial:
+            q0 = np.asarray(initial["q"], dtype=float)
+            if q0.shape != (model.nq,):
+                raise ValueError(f"initial.q needs nq = {model.nq} entries, got {q0.shape[0]}")
         if control.get("lock_joints", False) and model.njoints > 2:
             # A rigid robot: every joint but the free flyer held at its initial value.
             lock = list(range(2, model.njoints))
-            visual_red = pin.GeometryModel()
             model, visual = pin.buildReducedModel(model, visual, lock, q0)
             q0 = q0[:7].copy()
         if contacts_cfg.get("feet", spec is not None and bool(spec.feet)):
@@ -222,11 +231,22 @@ def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
     start = 6 if free else 0
     kp[start:] = float(control.get("kp", 0.0))
     kd[start:] = float(control.get("kd", 0.0))
+    q_target = q0.copy()
+    if "q_target" in control:
+        joints = np.asarray(control["q_target"], dtype=float)
+        if joints.shape != (model.nq - (7 if free else 0),):
+            raise ValueError(f"control.q_target needs the {model.nq - (7 if free else 0)} joint positions")
+        q_target[(7 if free else 0):] = joints
+    tau_ff = np.zeros(model.nv)
+    if control.get("gravity_feedforward", False):
+        tau_ff = pin.computeGeneralizedGravity(model, model.createData(), q_target).copy()
+        tau_ff[:start] = 0.0
 
     dt = float(cfg.get("dt", 1e-3))
     return Scene(
         name=cfg.get("name", default_name), description=cfg.get("description", ""), model=model,
         visual_model=visual, halfspaces=halfspaces, contacts=contacts, anchors=[], q0=q0, v0=v0, kp=kp, kd=kd,
+        q_target=q_target, tau_ff=tau_ff,
         duration=float(cfg.get("duration", 2.0)), dt=dt, settle_time=float(cfg.get("settle_time", 0.0)),
         mode=cfg.get("mode", "timestep"), delta=float(cfg.get("delta", 0.0)), zeta=float(cfg.get("zeta", 0.5)),
         slope_deg=slope_deg, mu=mu, config=cfg)

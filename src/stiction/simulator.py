@@ -13,6 +13,16 @@ from . import _core
 from .scene import Scene, load_scene
 
 STATE_NAMES = {0: "open", 1: "stick", 2: "slip", 3: "closed"}
+_VECTOR_KEYS = ("t", "residual", "iterations", "converged", "dt")
+
+
+def _rollout(model, data, n_steps: int, every: int = 1) -> dict:
+    """_core.rollout with every per-record matrix as a 2-D array (a 1-row Eigen
+    matrix may come back 1-D)."""
+    rec = _core.rollout(model, data, n_steps, every)
+    n = len(rec["t"])
+    return {k: (np.asarray(v).reshape(n) if k in _VECTOR_KEYS else np.asarray(v).reshape(n, -1))
+            for k, v in rec.items()}
 PHASES = ("kinematics", "delassus", "solve", "integrate", "total")
 
 
@@ -77,7 +87,7 @@ class Simulator:
     def reset(self) -> None:
         sc, d = self.scene, self.data
         d.q, d.v, d.t = sc.q0, sc.v0, 0.0
-        d.kp, d.kd, d.q_target = sc.kp, sc.kd, sc.q0
+        d.kp, d.kd, d.q_target, d.tau_ff = sc.kp, sc.kd, sc.q_target, sc.tau_ff
 
     def step(self) -> None:
         _core.step(self.model, self.data)
@@ -94,24 +104,24 @@ class Simulator:
             return self._rollout_adaptive(duration, callback)
         n = int(round(duration / self.settings.dt))
         if callback is None:
-            rec = _core.rollout(self.model, self.data, n, record_every)
+            rec = _rollout(self.model, self.data, n, record_every)
         else:
-            chunks = [_core.rollout(self.model, self.data, 0, 1)]
+            chunks = [_rollout(self.model, self.data, 0, 1)]
             for k in range(1, n + 1):
                 callback(self)
-                r = _core.rollout(self.model, self.data, 1, 1)
+                r = _rollout(self.model, self.data, 1, 1)
                 if k % record_every == 0:
                     chunks.append({key: val[1:] for key, val in r.items()})
             rec = {key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]}
         return self._trajectory(rec)
 
     def _rollout_adaptive(self, duration, callback) -> Trajectory:
-        chunks = [_core.rollout(self.model, self.data, 0, 1)]
+        chunks = [_rollout(self.model, self.data, 0, 1)]
         end = self.data.t + duration
         while self.data.t < end - 1e-12:
             if callback is not None:
                 callback(self)
-            r = _core.rollout(self.model, self.data, 1, 1)
+            r = _rollout(self.model, self.data, 1, 1)
             chunks.append({key: val[1:] for key, val in r.items()})
         rec = {key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]}
         return self._trajectory(rec)
@@ -127,15 +137,14 @@ class Simulator:
             converged=rec["converged"].astype(bool), dt=rec["dt"], timings=rec["timings"])
 
     # ---- post-processing
-    def contact_points(self, traj: Trajectory) -> np.ndarray:
-        """World position of every candidate contact point (sphere bottom), (N, nc, 3)."""
+    def contact_centers(self, traj: Trajectory) -> np.ndarray:
+        """World position of every candidate sphere centre (points: the point), (N, nc, 3)."""
         model, data = self.scene.model, self.scene.model.createData()
         out = np.empty((len(traj.t), len(self.scene.contacts), 3))
         for k, q in enumerate(traj.q):
             pin.framesForwardKinematics(model, data, q)
             for i, c in enumerate(self.scene.contacts):
-                normal = self.model.halfspaces[c.halfspace].normal
-                out[k, i] = data.oMf[c.frame].act(np.asarray(c.offset)) - c.radius * np.asarray(normal)
+                out[k, i] = data.oMf[c.frame].act(np.asarray(c.offset))
         return out
 
     def summary(self, traj: Trajectory) -> dict:
@@ -155,13 +164,18 @@ class Simulator:
         accel = 0.0
         if free and after.sum() >= 3:
             accel = float(np.polyfit(traj.t[after], traj.v[after, 0], 1)[0])
-        # foot slip: tangential displacement of contacts that stay closed after settling
-        points = self.contact_points(traj)
+        # foot slip after settling, for the contacts that stay closed: the distance the
+        # contact point slid (integral of the tangential contact velocity: rolling is
+        # not slip), and the horizontal displacement of the sphere centre (the peers'
+        # measure, which includes rolling).
         closed = (traj.gaps[after] <= 1e-4).all(axis=0)
-        slip = 0.0
+        slip = displacement = 0.0
         if closed.any():
-            disp = points[after][:, closed, :2] - points[i0][closed, :2]
-            slip = float(np.linalg.norm(disp, axis=-1).max())
+            speed = np.linalg.norm(traj.contact_velocity[after][:, closed, :2], axis=-1)
+            slip = float((speed[1:] * traj.dt[after][1:, None]).sum(axis=0).max())
+            centers = self.contact_centers(traj)
+            disp = centers[after][:, closed, :2] - centers[i0][closed, :2]
+            displacement = float(np.linalg.norm(disp, axis=-1).max())
         tim = np.median(traj.timings[1:], axis=0) if len(traj.t) > 1 else np.zeros(5)
         return {
             "scene": sc.name,
@@ -181,6 +195,7 @@ class Simulator:
             "mean_acceleration_along_slope": accel,
             "expected_sliding_acceleration": sliding_acceleration(sc),
             "max_foot_slip": slip,
+            "max_foot_displacement": displacement,
         }
 
 

@@ -168,8 +168,10 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
     sd.b.resize(rows);
     sd.drift.resize(rows);
     sd.position_error.resize(rows);
+    sd.tangent_row.resize(rows);
   }
   sd.position_error.setZero();
+  sd.tangent_row.setZero();
 
   // Contact frames, Jacobians J (rows t1, t2, n), drifts J' v and gaps Psi.
   Eigen::Index row = 0;
@@ -209,10 +211,12 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
     }
     sd.J.row(row) = t1.transpose() * sd.Jrel;
     sd.drift[row] = t1.dot(acc_point);
+    sd.tangent_row[row] = 1.0;
     ++row;
     if (!c.planar) {
       sd.J.row(row) = t2.transpose() * sd.Jrel;
       sd.drift[row] = t2.dot(acc_point);
+      sd.tangent_row[row] = 1.0;
       ++row;
     }
     sd.J.row(row) = n.transpose() * sd.Jrel;
@@ -359,6 +363,10 @@ void stepTimeStepping(const SimulatorModel& sim, SimulatorData& sd) {
   const double h = sim.settings.dt;
   // eq. 70: delta = h, zeta = 1/2; impulses P = h lambda solve A P - h b in -N(P).
   buildContactProblem(sim, sd, sd.q, sd.v, h, 0.5);
+  // The J' v term is dropped on the tangential rows (the paper allows it, §3.3):
+  // a sticking contact then ends the step with exactly zero slip velocity,
+  // J_t v+ = 0, instead of -h J_t' v. Normal rows keep it: it predicts the gap.
+  sd.b += sd.drift.cwiseProduct(sd.tangent_row);
   solveContacts(sim, sd, h);
   const auto t0 = Clock::now();
   sd.v += h * sd.v_free;  // v_free = v + h M^-1 (tau - nle)

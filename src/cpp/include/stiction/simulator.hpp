@@ -126,6 +126,7 @@ class SimulatorData {
   Eigen::VectorXd b;                 ///< eq. 27 at force level
   Eigen::VectorXd drift;             ///< J' v per row
   Eigen::VectorXd position_error;    ///< Psi per row (gap on normal rows, anchor error; 0 else)
+  Eigen::VectorXd tangent_row;       ///< 1 on tangential rows, 0 on normal and anchor rows
   Eigen::VectorXd gaps;              ///< signed distance per candidate contact
   Eigen::VectorXd lambda;            ///< forces per row of the last solve
   SolverResult result;               ///< the last solve
