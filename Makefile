@@ -6,13 +6,23 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.requirements-installed
 BUILD_TYPE ?= Release
 
-.PHONY: demo test build clean
+.PHONY: demo test build clean chromium
 
 demo: build
 	$(BIN)/stiction demo
 
-test: build
+test: build chromium
 	$(BIN)/python -m pytest -q
+
+# Headless Chromium checks the HTML recordings (tests/test_recording.py): Debian's
+# chromium, installed when missing and we may (root + apt-get).
+chromium:
+	@command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing chromium (apt-get)"; \
+	    DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium >/dev/null || \
+	    { apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium >/dev/null; }; \
+	  else echo "chromium not found and cannot be installed here: the recording test will be skipped"; fi; }
 
 # Incremental: scikit-build-core keeps build/<wheel tag>/, so touching one .cpp
 # recompiles one translation unit (ccache, when installed, caches across clones).

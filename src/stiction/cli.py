@@ -95,16 +95,41 @@ def cmd_fclib(args) -> int:
 
 
 def cmd_demo(args) -> int:
+    """The default demo: Solo-12 standing, then slipping down a slope (recordings, plots,
+    summaries), then the exact solver on a few real contact problems."""
+    from .recording import record_html
+    from .plots import plot_trajectory
+    from .simulator import Simulator
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    print("stiction demo: exact Coulomb contact, A λ - b ∈ -lim N_C^{U_ε}(λ) (eq. 65), solved every step\n")
+    ok = True
+    for scene, duration in (("solo12-stand", 2.0), ("solo12-slope-slip", 1.0)):
+        sim = Simulator(scene)
+        traj = sim.rollout(duration)
+        summary = sim.summary(traj)
+        html, png = out / f"{scene}.html", out / f"{scene}.png"
+        record_html(sim, traj, html)
+        plot_trajectory(sim, traj, png)
+        ok &= summary["all_converged"]
+        print(f"== {scene}: {sim.scene.description}")
+        keys = ("steps", "us_per_step", "max_penetration", "max_residual", "base_drift", "max_foot_slip",
+                "max_normal_velocity_while_sliding", "mean_acceleration_along_slope",
+                "expected_sliding_acceleration")
+        for k in keys:
+            print(f"   {k:36s} {summary[k]:.4g}" if isinstance(summary[k], float) else f"   {k:36s} {summary[k]}")
+        print(f"   µs per phase: " + ", ".join(f"{k} {v:.2f}" for k, v in summary["us_per_phase"].items()))
+        print(f"   recording {html}   plot {png}\n")
+
     root = bundled_fclib_dir()
-    print("stiction demo: the exact Coulomb problem A λ - b ∈ -lim N_C^{U_ε}(λ) (eq. 65)")
-    print(f"solved on real contact problems from Siconos and LMGC90 ({root}), solver '{args.solver}', tol {args.tol:g}\n")
-    rows = [solve_file(str(root / name), args.solver, args.tol, 5000, 30.0, None) for name in DEMO_PROBLEMS]
+    print(f"== The solver alone on real contact problems from Siconos and LMGC90 ({root.name}/):")
+    rows = [solve_file(str(root / name), "default", 1e-10, 5000, 30.0, None) for name in DEMO_PROBLEMS]
     print(_table(rows))
-    ok = sum(r["converged"] for r in rows)
-    print(f"\n{ok}/{len(rows)} converged; residual = ‖λ - P_C(λ - (u + E s(u)))‖ / (1 + ‖b‖), "
-          "relative = the same natural map / ‖b‖ (Siconos' measure).")
-    print("All 36 bundled problems: stiction fclib benchmarks/fclib/*  (table in docs/fclib.md)")
-    return 0 if ok == len(rows) else 1
+    ok &= all(r["converged"] for r in rows)
+    print("\nresidual = ‖λ - P_C(λ - (u + E s(u)))‖ / (1 + ‖b‖); relative = the same / ‖b‖ (Siconos' measure).")
+    print("More: stiction scenes | stiction simulate SCENE --json | stiction fclib benchmarks/fclib/*")
+    return 0 if ok else 1
 
 
 def cmd_scenes(args) -> int:
@@ -177,9 +202,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", action="store_true", help="print a JSON list instead of a table")
     p.set_defaults(func=cmd_fclib)
 
-    p = sub.add_parser("demo", help="the default demo: solve bundled contact problems")
-    p.add_argument("--solver", default="default", choices=solver_names())
-    p.add_argument("--tol", type=float, default=1e-10)
+    p = sub.add_parser("demo", help="the default demo: Solo-12 standing and slipping, recordings and plots")
+    p.add_argument("--out", default="out", help="folder for the HTML recordings and PNG plots (default out/)")
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("simulate", help="simulate a scene (see `stiction scenes`)")

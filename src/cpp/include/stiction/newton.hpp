@@ -36,7 +36,8 @@ class NewtonSolver final : public ContactSolver {
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
 };
 
-/// The default. Small problems (<= kNewtonFirstRows rows): Newton first. Larger
+/// The default. Small problems (<= kNewtonFirstRows rows): Newton first, then
+/// Newton from ProxQP's facetized-cone solution if that failed. Larger
 /// ones: NSGS while its rate promises to finish sooner than ~10 Newton steps
 /// (cheap sweeps, exact local solves), then Newton from the NSGS iterate and
 /// from the initial guess. If Newton's line search cannot finish:
