@@ -160,10 +160,12 @@ class Simulator:
         slipping = traj.states == 2
         vn = np.abs(traj.contact_velocity[..., 2])
         max_vn_slip = float(vn[slipping].max()) if slipping.any() else 0.0
-        # acceleration along the slope (+x downhill): least-squares slope of the base x velocity
+        # acceleration along the slope (+x downhill): least-squares slope of the base's
+        # world-frame x velocity (a free flyer's v is in its body frame: rotate it)
         accel = 0.0
         if free and after.sum() >= 3:
-            accel = float(np.polyfit(traj.t[after], traj.v[after, 0], 1)[0])
+            vx = [pin.Quaternion(q[3:7]).matrix()[0] @ v[:3] for q, v in zip(traj.q[after], traj.v[after])]
+            accel = float(np.polyfit(traj.t[after], vx, 1)[0])
         # foot slip after settling, for the contacts that stay closed: the distance the
         # contact point slid (integral of the tangential contact velocity: rolling is
         # not slip), and the horizontal displacement of the sphere centre (the peers'
