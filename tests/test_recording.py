@@ -56,7 +56,8 @@ def test_recording_replays_in_headless_chromium(recording, tmp_path):
     _, path, info = recording
     probe = tmp_path / "probe.html"
     probe.write_text(path.read_text().replace("</body>", PROBE))
-    out = subprocess.run([CHROMIUM, *FLAGS, "--virtual-time-budget=4000", "--dump-dom", str(probe)],
+    out = subprocess.run([CHROMIUM, *FLAGS, f"--user-data-dir={tmp_path / 'profile'}",
+                          "--virtual-time-budget=4000", "--dump-dom", str(probe)],
                          capture_output=True, text=True, timeout=120).stdout
     m = re.search(r'<pre id="probe">(.*?)</pre>', out)
     assert m, "the page did not run its scripts"
@@ -73,7 +74,9 @@ def test_recording_renders_the_scene(recording, tmp_path):
     """A screenshot: the robot, the ground and the sky are there (not a blank page)."""
     _, path, _ = recording
     shot = tmp_path / "shot.png"
-    subprocess.run([CHROMIUM, *FLAGS, "--window-size=640,480", "--virtual-time-budget=3000",
+    # a profile of its own: a second Chromium on the default profile can wait on the first's lock
+    subprocess.run([CHROMIUM, *FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--window-size=640,480",
+                    "--virtual-time-budget=3000",
                     f"--screenshot={shot}", str(path)], capture_output=True, timeout=120)
     import matplotlib.image as mpimg
 

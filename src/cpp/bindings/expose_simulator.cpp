@@ -74,8 +74,13 @@ Eigen::VectorXd get_b(const SimulatorData& d) { return d.b; }
 Eigen::VectorXd get_drift(const SimulatorData& d) { return d.drift; }
 Eigen::VectorXd get_position_error(const SimulatorData& d) { return d.position_error; }
 Eigen::VectorXd get_gaps(const SimulatorData& d) { return d.gaps; }
-Eigen::MatrixXd get_M(const SimulatorData& d) { return d.M; }
+Eigen::MatrixXd get_M(const SimulatorData& d) {  // symmetric, from Pinocchio's upper part
+  Eigen::MatrixXd M = d.data.M;
+  M.triangularView<Eigen::StrictlyLower>() = M.transpose();
+  return M;
+}
 Eigen::VectorXd get_tau(const SimulatorData& d) { return d.tau; }
+Eigen::VectorXd get_nle(const SimulatorData& d) { return d.nle; }
 Eigen::MatrixXd get_candidate_lambda(const SimulatorData& d) { return d.candidate_lambda; }
 Eigen::MatrixXd get_anchor_lambda(const SimulatorData& d) { return d.anchor_lambda; }
 Eigen::MatrixXd get_candidate_velocity(const SimulatorData& d) { return d.candidate_velocity; }
@@ -263,6 +268,7 @@ void exposeSimulator() {
       .add_property("gaps", &get_gaps)
       .add_property("M", &get_M)
       .add_property("tau", &get_tau)
+      .add_property("nle", &get_nle, "C(q, v) v + g(q) at the last problem built")
       .add_property("active", &get_active)
       .add_property("candidate_lambda", &get_candidate_lambda)
       .add_property("anchor_lambda", &get_anchor_lambda)

@@ -7,6 +7,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <pinocchio/algorithm/cholesky.hpp>
 #include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/algorithm/jacobian.hpp>
@@ -80,6 +81,8 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
   if (!(s.ode_tolerance > 0.0)) throw std::invalid_argument("ode_tolerance must be positive");
   if (!(s.activation_distance >= 0.0)) throw std::invalid_argument("activation_distance must be >= 0");
   makeSolver(s.solver);  // throws on an unknown name
+  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+    if (model.joints[j].shortname() == "JointModelFreeFlyer") free_flyers.push_back(j);
 }
 
 SimulatorData::SimulatorData(const SimulatorModel& sim)
@@ -94,10 +97,10 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
   control.v_target = Eigen::VectorXd::Zero(nv);
   control.tau_ff = Eigen::VectorXd::Zero(nv);
   gaps = Eigen::VectorXd::Zero(sim.contacts.size());
-  M.resize(nv, nv);
   J6.resize(6, nv);
   tau.resize(nv);
   nle.resize(nv);
+  zero_nv = Eigen::VectorXd::Zero(nv);
   v_free.resize(nv);
   dv.resize(nv);
   candidate_lambda = Eigen::MatrixXd::Zero(3, sim.contacts.size());
@@ -119,13 +122,45 @@ void computeControl(const SimulatorModel& sim, SimulatorData& sd, const Eigen::V
   sd.tau = c.kp.cwiseProduct(sd.dv) + c.kd.cwiseProduct(c.v_target - v) + c.tau_ff;
 }
 
+namespace {
+
+// nle = C(q, v) v + g(q) (Pinocchio's rnea at zero acceleration) from the forward
+// kinematics already in `data` (placements, velocities, accelerations at q'' = 0)
+// and the world-frame joint Jacobian: the backward pass of rnea, in world
+// coordinates, without repeating the forward pass (saves ~1 us on Solo-12).
+void nonLinearEffectsFromKinematics(const pinocchio::Model& model, pinocchio::Data& data,
+                                    std::vector<pinocchio::Force>& forces, Eigen::VectorXd& nle) {
+  const int n = model.njoints;
+  forces.resize(n);
+  const Eigen::Vector3d minus_g = -model.gravity.linear();
+  for (int i = 1; i < n; ++i) {
+    const pinocchio::SE3& oMi = data.oMi[i];
+    // a_gf = a + gravity seen as an upward acceleration of the base, in frame i
+    const pinocchio::Motion a_gf(data.a[i].linear() + oMi.rotation().transpose() * minus_g, data.a[i].angular());
+    const pinocchio::Inertia& Y = model.inertias[i];
+    const pinocchio::Force f_local = Y * a_gf + data.v[i].cross(Y * data.v[i]);
+    forces[i] = oMi.act(f_local);
+  }
+  for (int i = n - 1; i >= 1; --i) {
+    const int nv_i = model.nvs[i], iv = model.idx_vs[i];
+    for (int k = iv; k < iv + nv_i; ++k)
+      nle[k] = data.J.col(k).head<3>().dot(forces[i].linear()) + data.J.col(k).tail<3>().dot(forces[i].angular());
+    const auto parent = model.parents[i];
+    if (parent > 0) forces[parent] += forces[i];
+  }
+}
+
+}  // namespace
+
 void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                          const Eigen::VectorXd& v, double delta, double zeta) {
   const pinocchio::Model& model = sim.model;
   pinocchio::Data& data = sd.data;
   const auto t0 = Clock::now();
   // Kinematics with zero acceleration: the classical accelerations it leaves are J' v.
-  pinocchio::forwardKinematics(model, data, q, v, Eigen::VectorXd::Zero(model.nv));
+  // (computeAllTerms does it all in one pass but is slower here: it also computes
+  // the centre of mass and its Jacobian.)
+  pinocchio::forwardKinematics(model, data, q, v, sd.zero_nv);
   pinocchio::computeJointJacobians(model, data);
 
   // Detection: sphere (or point) against half-space, analytic.
@@ -240,18 +275,23 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
   const auto t1 = Clock::now();
 
   // Dynamics: M (crba) and its Cholesky, nle = C v + g, tau, A = J M^-1 J^T (eq. 22).
-  pinocchio::crba(model, data, q, pinocchio::Convention::WORLD);
-  sd.M = data.M;
-  sd.M.triangularView<Eigen::StrictlyLower>() = sd.M.transpose().triangularView<Eigen::StrictlyLower>();
-  sd.llt.compute(sd.M);
-  if (sd.llt.info() != Eigen::Success)
+  pinocchio::crba(model, data, q, pinocchio::Convention::LOCAL);
+  // M = U D U^T by Pinocchio's tree-sparse Cholesky (cheaper than a dense LLT).
+  pinocchio::cholesky::decompose(model, data);
+  if (!(data.D.minCoeff() > 0.0))
     throw std::runtime_error("the mass matrix is not positive definite at this configuration");
-  sd.nle = pinocchio::nonLinearEffects(model, data, q, v);
+  nonLinearEffectsFromKinematics(model, data, sd.forces, sd.nle);
   computeControl(sim, sd, q, v);
-  sd.v_free = sd.llt.solve(sd.tau - sd.nle);  // M^-1 (tau - nle): the free acceleration
-  sd.MinvJt = sd.llt.solve(sd.J.transpose());
-  sd.A.noalias() = sd.J * sd.MinvJt;
-  sd.A = 0.5 * (sd.A + sd.A.transpose()).eval();
+  sd.v_free = sd.tau - sd.nle;
+  pinocchio::cholesky::solve(model, data, sd.v_free);  // M^-1 (tau - nle): the free acceleration
+  // A = (D^-1/2 U^-1 J^T)^T (D^-1/2 U^-1 J^T): symmetric by construction.
+  sd.W = sd.J.transpose();
+  pinocchio::cholesky::Uiv(model, data, sd.W);
+  sd.W = data.Dinv.cwiseSqrt().asDiagonal() * sd.W;
+  sd.A.resize(rows, rows);
+  sd.A.setZero();
+  sd.A.selfadjointView<Eigen::Lower>().rankUpdate(sd.W.transpose());
+  sd.A.triangularView<Eigen::StrictlyUpper>() = sd.A.transpose();
   // eq. 27 with Phi = nle - tau: b = J M^-1 Phi - J' v - (2 zeta / delta) J v - Psi / delta^2
   sd.b.noalias() = -sd.J * sd.v_free;
   sd.b -= sd.drift;
@@ -347,7 +387,11 @@ void acceleration(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
   buildContactProblem(sim, sd, q, v, delta, sim.settings.zeta);
   solveContacts(sim, sd, 1.0);
   a = sd.v_free;  // M^-1 (tau - nle)
-  if (sd.J.rows() > 0) a.noalias() += sd.MinvJt * sd.lambda;
+  if (sd.J.rows() > 0) {
+    sd.dv.noalias() = sd.J.transpose() * sd.lambda;
+    pinocchio::cholesky::solve(sim.model, sd.data, sd.dv);
+    a += sd.dv;
+  }
   ++sd.rhs_evaluations;
 }
 
@@ -361,19 +405,19 @@ void acceleration(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
 // turn that the bias forces contain), the origin moves on the straight line
 // p + h R_k v+, and v+ is re-expressed in the new frame. The constraint J(q_k) v+
 // and b are unchanged (the drift's omega x v part cancels the added term).
-void addFrameTurn(const pinocchio::Model& model, const Eigen::VectorXd& v, double h, Eigen::VectorXd& dv) {
-  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j) {
-    if (model.joints[j].shortname() != "JointModelFreeFlyer") continue;
-    const int iv = model.idx_vs[j];
+void addFrameTurn(const SimulatorModel& sim, const Eigen::VectorXd& v, double h, Eigen::VectorXd& dv) {
+  for (pinocchio::JointIndex j : sim.free_flyers) {
+    const int iv = sim.model.idx_vs[j];
     dv.segment<3>(iv) += h * v.segment<3>(iv + 3).cross(v.segment<3>(iv));
   }
 }
 
-void integrateTimeStep(const pinocchio::Model& model, const Eigen::VectorXd& q, Eigen::VectorXd& v, double h,
+void integrateTimeStep(const SimulatorModel& sim, const Eigen::VectorXd& q, Eigen::VectorXd& v, double h,
                        Eigen::VectorXd& out) {
-  out = pinocchio::integrate(model, q, h * v);
-  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j) {
-    if (model.joints[j].shortname() != "JointModelFreeFlyer") continue;
+  const pinocchio::Model& model = sim.model;
+  out.resize(model.nq);
+  pinocchio::integrate(model, q, h * v, out);
+  for (pinocchio::JointIndex j : sim.free_flyers) {
     const int iq = model.idx_qs[j], iv = model.idx_vs[j];
     const Eigen::Quaterniond quat(q[iq + 6], q[iq + 3], q[iq + 4], q[iq + 5]);
     out.segment<3>(iq) = q.segment<3>(iq) + h * (quat.toRotationMatrix() * v.segment<3>(iv));
@@ -406,12 +450,16 @@ void stepTimeStepping(const SimulatorModel& sim, SimulatorData& sd) {
   solveContacts(sim, sd, h);
   const auto t0 = Clock::now();
   sd.dv = h * sd.v_free;  // h M^-1 (tau - nle)
-  addFrameTurn(sim.model, sd.v, h, sd.dv);
+  addFrameTurn(sim, sd.v, h, sd.dv);
   sd.v += sd.dv;
-  if (sd.J.rows() > 0) sd.v.noalias() += sd.MinvJt * sd.result.lam;
+  if (sd.J.rows() > 0) {  // + M^-1 J^T P
+    sd.dv.noalias() = sd.J.transpose() * sd.result.lam;
+    pinocchio::cholesky::solve(sim.model, sd.data, sd.dv);
+    sd.v += sd.dv;
+  }
   // contact velocities J(q_k) v+, in the frame the solve used
   if (sd.J.rows() > 0) sd.row_velocity.noalias() = sd.J * sd.v;
-  integrateTimeStep(sim.model, sd.q, sd.v, h, sd.q_tmp);  // symplectic: uses v+
+  integrateTimeStep(sim, sd.q, sd.v, h, sd.q_tmp);  // symplectic: uses v+
   sd.q = sd.q_tmp;
   sd.t += h;
   sd.last_dt = h;

@@ -57,7 +57,7 @@ class DefaultSolver final : public ContactSolver {
   NsgsSolver nsgs_;
   NewtonSolver newton_;
   AdmmSolver admm_;
-  Eigen::VectorXd best_, trial_, initial_;
+  Eigen::VectorXd best_, trial_, initial_, u_ws_;
 };
 
 }  // namespace stiction

@@ -99,6 +99,7 @@ class SimulatorModel {
   std::vector<SphereContact> contacts;
   std::vector<PointAnchor> anchors;
   SimulatorSettings settings;
+  std::vector<pinocchio::JointIndex> free_flyers;  ///< derived: the free-flyer joints
 };
 
 /// Microseconds spent per phase in the last step (summed over RHS evaluations in ODE modes).
@@ -149,16 +150,16 @@ class SimulatorData {
   double next_dt = 0.0;  ///< adaptive mode: the proposal for the next step
 
   // Workspace, reused from step to step.
-  Eigen::MatrixXd M, MinvJt, J6, Jrel;
+  Eigen::MatrixXd W, J6, Jrel;  ///< W = D^-1/2 U^-1 J^T (M = U D U^T)
   Eigen::Matrix3Xd plane_normal, plane_t1, plane_t2;  ///< world axes of each half-space
   Eigen::VectorXd plane_offset;
-  Eigen::LLT<Eigen::MatrixXd> llt;
-  Eigen::VectorXd tau, nle, v_free, dv, guess, q_tmp, row_velocity;
+  Eigen::VectorXd tau, nle, v_free, dv, guess, q_tmp, row_velocity, zero_nv;
   std::shared_ptr<DenseDelassus> delassus;
   std::unique_ptr<ContactProblem> problem;
   std::vector<int> problem_active;
   std::unique_ptr<ContactSolver> solver;
   std::vector<Eigen::VectorXd> stage_v, stage_a;
+  std::vector<pinocchio::Force> forces;
 };
 
 /// Advance sim_data by one step (time stepping: exactly dt; ODE modes: one
