@@ -50,7 +50,7 @@ void addDesaxce(const ContactProblem& problem, const Eigen::VectorXd& u, double 
   for (std::size_t i = 0; i < cons.size(); ++i) {
     const Eigen::Index o = off[i];
     if (cons[i].kind == ConstraintKind::kSpatialFriction)
-      v[o + 2] += sign * cons[i].mu * std::hypot(u[o], u[o + 1]);
+      v[o + 2] += sign * cons[i].mu * norm2(u[o], u[o + 1]);
     else if (cons[i].kind == ConstraintKind::kPlanarFriction)
       v[o + 1] += sign * cons[i].mu * std::abs(u[o]);
   }

@@ -45,7 +45,7 @@ double blockResidual(const Eigen::Matrix<double, N, N>& G, const Eigen::Matrix<d
   Eigen::Matrix<double, N, 1> u = G * lam + c;
   Eigen::Matrix<double, N, 1> z = lam - u;
   if constexpr (N == 3) {
-    z[2] -= mu * std::hypot(u[0], u[1]);
+    z[2] -= mu * norm2(u[0], u[1]);
     projectSpatialCone(z, mu);
   } else {
     z[1] -= mu * std::abs(u[0]);
@@ -70,7 +70,7 @@ ContactState solveSpatialBlock(const Eigen::Matrix3d& G, const Eigen::Matrix3d& 
   }
   // Stick: u = 0.
   const Eigen::Vector3d lam_stick = -G_inv * c;
-  const double stick_t = std::hypot(lam_stick[0], lam_stick[1]);
+  const double stick_t = norm2(lam_stick[0], lam_stick[1]);
   if (lam_stick[2] > 0.0 && stick_t <= mu * lam_stick[2]) {
     lam = lam_stick;
     return ContactState::kStick;
@@ -132,7 +132,7 @@ ContactState solveSpatialBlock(const Eigen::Matrix3d& G, const Eigen::Matrix3d& 
     const Eigen::Vector3d cand = (-cn / a) * w;
     const Eigen::Vector3d u = Gr * cand + cr;
     const double along = u[0] * C + u[1] * S;  // must be <= 0: u_t opposite to lambda_t
-    const double ut_norm = std::hypot(u[0], u[1]);
+    const double ut_norm = norm2(u[0], u[1]);
     const bool valid = along <= 1e-9 * ut_norm;
     const double res = blockResidual<3>(Gr, cr, mu, cand);
     const double dist = (cand - lam_prev).norm();

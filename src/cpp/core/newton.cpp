@@ -84,15 +84,15 @@ void NewtonSolver::evaluate(const ContactProblem& problem, const Eigen::VectorXd
           const Eigen::Matrix2d JP = coneProjectionJacobian<2>(z, mu);
           const double sg = ut > 0.0 ? 1.0 : (ut < 0.0 ? -1.0 : 0.0);
           // rows of (I + D_s) A
-          Eigen::Matrix<double, 2, Eigen::Dynamic> M = A.middleRows(o, 2);
-          M.row(1) += mu * sg * A.row(o);
-          J_.middleRows(o, 2).noalias() = kap * JP * M;
+          // rows of (I + D_s) A, D_s = d(E s)/du
+          J_.middleRows(o, 2).noalias() = kap * JP * A.middleRows(o, 2);
+          if (sg != 0.0) J_.middleRows(o, 2).noalias() += (kap * mu * sg) * JP.col(1) * A.row(o);
           J_.block(o, o, 2, 2) += Eigen::Matrix2d::Identity() - JP;
         }
         break;
       }
       case ConstraintKind::kSpatialFriction: {
-        const double utn = std::hypot(u_[o], u_[o + 1]);
+        const double utn = norm2(u_[o], u_[o + 1]);
         Eigen::Vector3d z = lam.segment<3>(o) - kap * u_.segment<3>(o);
         z[2] -= kap * mu * utn;
         Eigen::Vector3d p = z;
@@ -100,9 +100,12 @@ void NewtonSolver::evaluate(const ContactProblem& problem, const Eigen::VectorXd
         F_.segment<3>(o) = lam.segment<3>(o) - p;
         if (jacobian) {
           const Eigen::Matrix3d JP = coneProjectionJacobian<3>(z, mu);
-          Eigen::Matrix<double, 3, Eigen::Dynamic> M = A.middleRows(o, 3);
-          if (utn > 0.0) M.row(2) += mu / utn * (u_[o] * A.row(o) + u_[o + 1] * A.row(o + 1));
-          J_.middleRows(o, 3).noalias() = kap * JP * M;
+          // rows of (I + D_s) A, D_s = d(E s)/du: the normal row gains mu u_t^T A_t / |u_t|
+          J_.middleRows(o, 3).noalias() = kap * JP * A.middleRows(o, 3);
+          if (utn > 0.0) {
+            row_.noalias() = (u_[o] / utn) * A.row(o) + (u_[o + 1] / utn) * A.row(o + 1);
+            J_.middleRows(o, 3).noalias() += (kap * mu) * JP.col(2) * row_;
+          }
           J_.block(o, o, 3, 3) += Eigen::Matrix3d::Identity() - JP;
         }
         break;
@@ -145,7 +148,8 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
     const double eps = std::min(1e-2, std::max(1e-14, f_norm / (1.0 + lam.norm())));
     J_.diagonal().array() += eps;
     lu_.compute(J_);
-    step_ = -lu_.solve(F_);
+    step_ = lu_.solve(F_);
+    step_ = -step_;
     if (!step_.allFinite()) {
       message = "singular Newton system";
       break;

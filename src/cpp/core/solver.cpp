@@ -43,7 +43,7 @@ double naturalMapNorm(const ContactProblem& problem, const Eigen::Ref<const Eige
       }
       case ConstraintKind::kSpatialFriction: {
         Eigen::Vector3d z = lam.segment<3>(o) - u.segment<3>(o);
-        z[2] -= mu * std::hypot(u[o], u[o + 1]);  // De Saxce: u + E s(u), eq. 76-77
+        z[2] -= mu * norm2(u[o], u[o + 1]);  // De Saxce: u + E s(u), eq. 76-77
         projectSpatialCone(z, mu);
         sq += (lam.segment<3>(o) - z).squaredNorm();
         break;
@@ -99,8 +99,8 @@ void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen:
     // Slip when the tangential velocity outweighs what the unused friction could cancel.
     double lt, ut, a_tt;
     if (k == 3) {
-      lt = std::hypot(lam[o], lam[o + 1]);
-      ut = std::hypot(u[o], u[o + 1]);
+      lt = norm2(lam[o], lam[o + 1]);
+      ut = norm2(u[o], u[o + 1]);
       a_tt = 0.5 * (A(o, o) + A(o + 1, o + 1));
     } else {
       lt = std::abs(lam[o]);

@@ -285,8 +285,9 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
   sd.v_free = sd.tau - sd.nle;
   pinocchio::cholesky::solve(model, data, sd.v_free);  // M^-1 (tau - nle): the free acceleration
   // A = (D^-1/2 U^-1 J^T)^T (D^-1/2 U^-1 J^T): symmetric by construction.
+  // (dense triangular solve: cheaper than Pinocchio's per-column Uiv at these sizes)
   sd.W = sd.J.transpose();
-  pinocchio::cholesky::Uiv(model, data, sd.W);
+  data.U.triangularView<Eigen::UnitUpper>().solveInPlace(sd.W);
   sd.W = data.Dinv.cwiseSqrt().asDiagonal() * sd.W;
   sd.A.resize(rows, rows);
   sd.A.setZero();
@@ -322,7 +323,8 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     sd.problem_active = sd.active;
   } else {
     sd.delassus->matrix() = sd.A;
-    sd.problem->setB(scale * sd.b);
+    sd.b_scaled = scale * sd.b;
+    sd.problem->setB(sd.b_scaled);
   }
   if (!sd.A.allFinite() || !sd.b.allFinite())
     throw std::runtime_error("non-finite Delassus operator or right-hand side at t = " + std::to_string(sd.t));

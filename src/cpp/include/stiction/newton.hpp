@@ -32,7 +32,8 @@ class NewtonSolver final : public ContactSolver {
   void evaluate(const ContactProblem& problem, const Eigen::VectorXd& lam, bool jacobian);
 
   Eigen::VectorXd kappa_, u_, z_, F_, trial_, step_, trial_F_;
-  Eigen::MatrixXd J_, dz_;  // dz_ = dz/dlambda
+  Eigen::MatrixXd J_;
+  Eigen::RowVectorXd row_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
 };
 

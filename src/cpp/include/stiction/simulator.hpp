@@ -153,7 +153,7 @@ class SimulatorData {
   Eigen::MatrixXd W, J6, Jrel;  ///< W = D^-1/2 U^-1 J^T (M = U D U^T)
   Eigen::Matrix3Xd plane_normal, plane_t1, plane_t2;  ///< world axes of each half-space
   Eigen::VectorXd plane_offset;
-  Eigen::VectorXd tau, nle, v_free, dv, guess, q_tmp, row_velocity, zero_nv;
+  Eigen::VectorXd tau, nle, v_free, dv, guess, q_tmp, row_velocity, zero_nv, b_scaled;
   std::shared_ptr<DenseDelassus> delassus;
   std::unique_ptr<ContactProblem> problem;
   std::vector<int> problem_active;
