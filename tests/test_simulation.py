@@ -159,3 +159,60 @@ def test_python_callback_sets_torques():
             assert abs(traj.q[-1, 0] - traj.q[0, 0]) <= 1e-12
         else:
             assert traj.v[-1, 0] == pytest.approx((push - 0.5 * G) * 0.2, rel=1e-9)
+
+
+@pytest.mark.parametrize("mode, dt, extra", [("timestep", 1e-4, {}), ("rk4", 1e-3, {"delta": 1e-2})])
+def test_pinned_pendulum_swings_with_the_right_period(mode, dt, extra):
+    """Bilateral rows (a point anchor, paper §3): a rod pinned at one end, released at
+    theta0 = 0.05 rad. Period T0 (1 + theta0^2 / 16) with T0 = 2 pi sqrt(I_pivot / (m g d)),
+    the pivot held to 1e-8 m."""
+    import pinocchio as pin
+
+    sim = Simulator("rod-pendulum", mode=mode, dt=dt, **extra)
+    traj = sim.rollout(3.0, record_every=10 if mode == "timestep" else 1)
+    model, data = sim.scene.model, sim.scene.model.createData()
+    frame = model.getFrameId("rod")
+    x, err = [], []
+    for q in traj.q:
+        pin.framesForwardKinematics(model, data, q)
+        x.append(data.oMf[frame].translation[0])
+        err.append(np.linalg.norm(data.oMf[frame].act(np.array([-0.25, 0, 0])) - [0, 0, 1.0]))
+    x, t = np.array(x), traj.t
+    crossings = [t[i] - x[i] * (t[i + 1] - t[i]) / (x[i + 1] - x[i]) for i in range(len(x) - 1) if x[i] > 0 >= x[i + 1]]
+    period = np.diff(crossings).mean()
+    inertia = 0.0208666667 + 1.0 * 0.25**2  # about the pivot
+    expected = 2 * math.pi * math.sqrt(inertia / (G * 0.25)) * (1 + 0.05**2 / 16)
+    assert period == pytest.approx(expected, rel=2e-5)
+    assert max(err) <= 1e-8
+    assert (traj.converged[1:]).all()
+
+
+def test_scene_from_a_user_model_matches_the_scene_file():
+    """Passing the pinocchio.Model you have gives the same motion as the bundled scene."""
+    from stiction.robots import ROBOTS, load_robot
+    from stiction.scene import scene_from_model
+
+    robot = load_robot("solo12")
+    spec = ROBOTS["solo12"]
+    scene = scene_from_model(robot.model, robot.visual_model, robot.q0, spheres=[(f, 0.016) for f in spec.feet],
+                             mu=1.0, kp=20.0, kd=0.2)
+    a = Simulator(scene).rollout(0.3)
+    b = Simulator("solo12-stand").rollout(0.3)
+    np.testing.assert_allclose(a.q, b.q, atol=1e-12)
+    np.testing.assert_allclose(a.lam, b.lam, atol=1e-9)
+
+
+def test_rolling_ball_accelerates_at_five_sevenths_g_sin_theta():
+    """A solid ball rolls without slipping down a 20 degree slope (mu 0.8): a = (5/7) g
+    sin(theta), rolling counts as sticking, and the ball never leaves the slope."""
+    from stiction.scene import build_scene
+
+    scene = build_scene({"urdf": "ball.urdf", "ground": {"slope_deg": 20.0, "mu": 0.8}, "settle_time": 0.1,
+                         "contacts": {"frames": ["ball"], "radius": 0.05}, "duration": 1.0})
+    sim = Simulator(scene)
+    traj = sim.rollout()
+    s = sim.summary(traj)
+    assert s["mean_acceleration_along_slope"] == pytest.approx(5 / 7 * G * math.sin(math.radians(20)), rel=1e-6)
+    assert (traj.states[1:, 0] == 1).all()
+    assert np.abs(traj.contact_velocity[1:, 0, 2]).max() <= 1e-12
+    assert np.abs(traj.gaps[1:]).max() <= 1e-12

@@ -20,6 +20,8 @@ Keys (all optional unless stated):
                base_xy = [x, y], drop = 0.0 (m above touch)
     [[walls]]  name, normal, offset (free space: normal . x >= offset), frames (spheres on them),
                radius, mu
+    [[anchors]] frame, offset (in the frame), target (world; default: where the point is at q0):
+               3 bilateral rows each (paper §3), e.g. a pendulum pinned to the world
 """
 from __future__ import annotations
 
@@ -206,13 +208,28 @@ def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
                                     wall.get("offset_in_frame", (0, 0, 0)), float(wall.get("radius", 0.0)),
                                     len(halfspaces) - 1, float(wall.get("mu", mu))))
 
+    anchors = []
+    for k, a in enumerate(cfg.get("anchors", [])):
+        if not model.existFrame(a["frame"]):
+            raise ValueError(f"anchors[{k}]: no frame {a['frame']!r} in the model")
+        pa = _core.PointAnchor()
+        pa.name, pa.frame = a.get("name", f"anchor{k}"), model.getFrameId(a["frame"])
+        pa.offset = np.asarray(a.get("offset", (0.0, 0.0, 0.0)), dtype=float)
+        if "target" in a:
+            pa.target = np.asarray(a["target"], dtype=float)
+        else:
+            data = model.createData()
+            pin.framesForwardKinematics(model, data, q0)
+            pa.target = data.oMf[pa.frame].act(pa.offset)
+        anchors.append(pa)
+
     # Tilted gravity models the slope (downhill = +x).
     th = math.radians(slope_deg)
     model.gravity = pin.Motion(np.array([GRAVITY * math.sin(th), 0.0, -GRAVITY * math.cos(th)]), np.zeros(3))
 
     free = model.joints[1].shortname() == "JointModelFreeFlyer" if model.njoints > 1 else False
     v0 = np.zeros(model.nv)
-    if free and "bodies" not in cfg:
+    if free and "bodies" not in cfg and not anchors:
         q0[:2] = initial.get("base_xy", [0.0, 0.0])
         # lower (or raise) the base so the lowest contact touches z = 0, plus `drop`
         data = model.createData()
@@ -245,11 +262,49 @@ def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
     dt = float(cfg.get("dt", 1e-3))
     return Scene(
         name=cfg.get("name", default_name), description=cfg.get("description", ""), model=model,
-        visual_model=visual, halfspaces=halfspaces, contacts=contacts, anchors=[], q0=q0, v0=v0, kp=kp, kd=kd,
+        visual_model=visual, halfspaces=halfspaces, contacts=contacts, anchors=anchors, q0=q0, v0=v0, kp=kp, kd=kd,
         q_target=q_target, tau_ff=tau_ff,
         duration=float(cfg.get("duration", 2.0)), dt=dt, settle_time=float(cfg.get("settle_time", 0.0)),
         mode=cfg.get("mode", "timestep"), delta=float(cfg.get("delta", 0.0)), zeta=float(cfg.get("zeta", 0.5)),
         slope_deg=slope_deg, mu=mu, config=cfg)
+
+
+def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = None, q0=None, *,
+                     name: str = "model", spheres=(), mu: float = 0.5, slope_deg: float = 0.0, kp: float = 0.0,
+                     kd: float = 0.0, dt: float = 1e-3, duration: float = 1.0, settle_time: float = 0.0,
+                     place_on_ground: bool = True) -> Scene:
+    """A scene from the pinocchio.Model (and GeometryModel) you already have.
+
+    spheres: (frame name, radius) or (frame name, radius, offset) contact spheres against the
+    ground z = 0. With place_on_ground the free-flyer base is lowered so the lowest sphere touches.
+    """
+    model = model.copy()
+    visual_model = visual_model if visual_model is not None else pin.GeometryModel()
+    q = pin.neutral(model) if q0 is None else np.asarray(q0, dtype=float).copy()
+    if q.shape != (model.nq,):
+        raise ValueError(f"q0 needs nq = {model.nq} entries, got {q.shape}")
+    contacts = []
+    for spec in spheres:
+        frame, radius = spec[0], float(spec[1])
+        offset = spec[2] if len(spec) > 2 else (0.0, 0.0, 0.0)
+        if not model.existFrame(frame):
+            raise ValueError(f"spheres: no frame {frame!r} in the model")
+        contacts.append(_sphere(frame, model.getFrameId(frame), offset, radius, 0, mu))
+    th = math.radians(slope_deg)
+    model.gravity = pin.Motion(np.array([GRAVITY * math.sin(th), 0.0, -GRAVITY * math.cos(th)]), np.zeros(3))
+    free = model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer"
+    if free and place_on_ground and contacts:
+        data = model.createData()
+        pin.framesForwardKinematics(model, data, q)
+        q[2] -= min(data.oMf[c.frame].act(np.asarray(c.offset))[2] - c.radius for c in contacts)
+    start = 6 if free else 0
+    kpv, kdv = np.zeros(model.nv), np.zeros(model.nv)
+    kpv[start:], kdv[start:] = kp, kd
+    return Scene(name=name, description="built from a pinocchio.Model", model=model, visual_model=visual_model,
+                 halfspaces=[_halfspace("ground", (0, 0, 1), 0.0)], contacts=contacts, anchors=[], q0=q,
+                 v0=np.zeros(model.nv), kp=kpv, kd=kdv, q_target=q.copy(), tau_ff=np.zeros(model.nv),
+                 duration=duration, dt=dt, settle_time=settle_time, mode="timestep", delta=0.0, zeta=0.5,
+                 slope_deg=slope_deg, mu=mu)
 
 
 def _stacked_bodies(paths: list[str], mu: float, halfspaces: list):
