@@ -97,3 +97,12 @@ def test_zero_iterations_evaluates_the_guess(solver):
     assert r.iterations == 0
     np.testing.assert_array_equal(r.lam, guess)
     assert r.residual == pytest.approx(stiction.residual(p, guess))
+
+
+@pytest.mark.parametrize("solver", ["default", "nsgs", "newton", "admm"])
+@pytest.mark.parametrize("warm", [None, "proxqp"])
+def test_empty_problem_is_solved_trivially(solver, warm):
+    """No active contact (a robot in the air): nothing to solve, no crash."""
+    p = ContactProblem(np.zeros((0, 0)), np.zeros(0), [])
+    r = stiction.solve(p, solver=solver, warm_start=warm)
+    assert r.converged and r.lam.shape == (0,) and r.residual == 0.0

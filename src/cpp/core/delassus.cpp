@@ -26,6 +26,7 @@ Eigen::MatrixXd DenseDelassus::diagonalBlock(Eigen::Index offset, Eigen::Index s
 }
 
 double DenseDelassus::relativeAsymmetry() const {
+  if (A_.size() == 0) return 0.0;  // an empty problem (no active contact) is symmetric
   const double scale = A_.cwiseAbs().maxCoeff();
   if (!(scale > 0.0)) return 0.0;
   return (A_ - A_.transpose()).cwiseAbs().maxCoeff() / scale;

@@ -12,6 +12,10 @@ int proxqpWarmStart(const ContactProblem& problem, const SolverSettings& setting
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
   const Eigen::Index m = problem.numRows();
+  if (m == 0) {
+    lam.resize(0);
+    return 0;
+  }
   const int facets = std::max(3, settings.proxqp_facets);
   Eigen::Index n_in = 0;
   for (const Constraint& c : cons) {
