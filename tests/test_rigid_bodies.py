@@ -82,3 +82,17 @@ def test_nsgs_alone_stalls_on_the_heavy_stack():
     r = stiction.solve(rp.problem, solver="nsgs", tol=1e-8, max_iter=2000)
     assert not r.converged and r.residual > 1e-8
     assert "iteration limit" in r.message
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_default_recovers_where_newton_alone_stalls(seed):
+    """The heavy stack at rest with b perturbed by 1 % (one contact lifts, the rest stick):
+    Newton from zero stalls (residual 1e-6 .. 1e-4); the default restarts Newton from ProxQP's
+    facetized-cone solution and converges (docs/warm-start.md)."""
+    p = two_cube_stack(1e4, 0.3).problem
+    rng = np.random.default_rng(seed)
+    q = stiction.ContactProblem(p.A, p.b * (1 + 0.01 * rng.standard_normal(p.b.size)), p.constraints)
+    alone = stiction.solve(q, solver="newton", tol=1e-10, max_iter=30)
+    assert not alone.converged
+    r = stiction.solve(q, tol=1e-10)
+    assert r.converged and r.relative_residual <= 1e-10 and "proxqp" in r.message
