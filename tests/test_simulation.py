@@ -216,3 +216,35 @@ def test_rolling_ball_accelerates_at_five_sevenths_g_sin_theta():
     assert (traj.states[1:, 0] == 1).all()
     assert np.abs(traj.contact_velocity[1:, 0, 2]).max() <= 1e-12
     assert np.abs(traj.gaps[1:]).max() <= 1e-12
+
+
+def test_coal_pair_rolling_ball_matches_the_analytic_path():
+    """The same rolling ball, its sphere-vs-ground contact found by coal (a general pair)
+    instead of the analytic sphere/half-space path: the same exact answer."""
+    from stiction.scene import build_scene
+
+    scene = build_scene({"urdf": "ball.urdf", "ground": {"slope_deg": 20.0, "mu": 0.8}, "settle_time": 0.1,
+                         "duration": 1.0, "contacts": {"feet": False},
+                         "collision": {"pairs": [["ball_0", "ground"]], "max_contacts": 1}})
+    assert scene.contacts == [] and len(scene.pairs) == 1
+    sim = Simulator(scene)
+    traj = sim.rollout()
+    s = sim.summary(traj)
+    assert s["mean_acceleration_along_slope"] == pytest.approx(5 / 7 * G * math.sin(math.radians(20)), rel=1e-6)
+    assert s["max_penetration"] <= 1e-12
+    assert np.abs(traj.contact_velocity[1:, 0, 2]).max() <= 1e-12
+    assert sim.contact_names == ["ball_0|ground#0"]
+
+
+def test_ball_lands_and_rests_on_a_table_through_coal():
+    """Sphere against a box fixed in the world (coal): after landing the ball rests on the
+    table top at height 0.2 + r, carrying m g, and the ground pair stays open."""
+    sim = Simulator("ball-on-table")
+    traj = sim.rollout(1.0)
+    s = sim.summary(traj)
+    assert s["all_converged"]
+    assert traj.q[-1, 2] == pytest.approx(0.25, abs=1e-9)
+    assert traj.q[-1, 0] == pytest.approx(0.05, abs=1e-9)  # no sideways push
+    assert traj.lam[-1, 1, 2] == pytest.approx(0.5 * G, rel=1e-9)
+    assert np.isinf(traj.gaps[-1, 0]) or traj.gaps[-1, 0] > 0.1  # ground: far below
+    assert s["max_penetration"] <= 1e-6

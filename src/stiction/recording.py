@@ -152,7 +152,7 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50) -> dict:
                 T = vdata.oMg[g].homogeneous.copy()
                 T[:3, :3] = T[:3, :3] @ scales[g]
                 frame[name].set_transform(T)
-            for i, c in enumerate(scene.contacts):
+            for i, c in enumerate(scene.contacts):  # coal pair slots are not drawn
                 h = sim.model.halfspaces[c.halfspace]
                 n, t1, t2 = (np.asarray(h.normal), np.asarray(h.tangent1), np.asarray(h.tangent2))
                 point = centers[k, i] - c.radius * n

@@ -22,6 +22,10 @@ Keys (all optional unless stated):
                radius, mu
     [[anchors]] frame, offset (in the frame), target (world; default: where the point is at q0):
                3 bilateral rows each (paper §3), e.g. a pendulum pinned to the world
+    [collision] general shapes through coal, for what the analytic spheres and points do not
+               cover: pairs = [["geometry a", "geometry b"], ...] among the URDF's collision
+               geometries, "ground" (the plane z = 0) and fixed world boxes
+               [[collision.boxes]] name, size = [x, y, z], position = [x, y, z]; max_contacts
 """
 from __future__ import annotations
 
@@ -67,6 +71,8 @@ class Scene:
     slope_deg: float
     mu: float
     config: dict = field(default_factory=dict)
+    geometry: pin.GeometryModel | None = None  # shapes for the coal pairs
+    pairs: list = field(default_factory=list)  # _core.GeometryPairContact
 
     @property
     def slope(self) -> float:
@@ -208,6 +214,10 @@ def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
                                     wall.get("offset_in_frame", (0, 0, 0)), float(wall.get("radius", 0.0)),
                                     len(halfspaces) - 1, float(wall.get("mu", mu))))
 
+    geometry, pairs = None, []
+    if "collision" in cfg:
+        geometry, pairs = _collision_pairs(cfg, model, mu)
+
     anchors = []
     for k, a in enumerate(cfg.get("anchors", [])):
         if not model.existFrame(a["frame"]):
@@ -230,13 +240,22 @@ def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
     free = model.joints[1].shortname() == "JointModelFreeFlyer" if model.njoints > 1 else False
     v0 = np.zeros(model.nv)
     if free and "bodies" not in cfg and not anchors:
-        q0[:2] = initial.get("base_xy", [0.0, 0.0])
+        if "base_xy" in initial or "q" not in initial:
+            q0[:2] = initial.get("base_xy", [0.0, 0.0])
         # lower (or raise) the base so the lowest contact touches z = 0, plus `drop`
         data = model.createData()
         pin.framesForwardKinematics(model, data, q0)
         lowest = min((data.oMf[c.frame].act(c.offset)[2] - c.radius for c in contacts if c.halfspace == 0),
-                     default=0.0)
-        q0[2] += -lowest + float(initial.get("drop", 0.0))
+                     default=math.inf)
+        if geometry is not None:  # coal pairs with the ground: their signed distances
+            gdata = geometry.createData()
+            pin.updateGeometryPlacements(model, data, geometry, gdata)
+            for gp in pairs:
+                cp = geometry.collisionPairs[gp.pair]
+                if "ground" in (geometry.geometryObjects[cp.first].name, geometry.geometryObjects[cp.second].name):
+                    lowest = min(lowest, pin.computeDistance(geometry, gdata, gp.pair).min_distance)
+        if math.isfinite(lowest) and "q" not in initial:
+            q0[2] += -lowest + float(initial.get("drop", 0.0))
         v0[:6] = initial.get("base_velocity", [0.0] * 6)
     elif "bodies" in cfg and "top_velocity" in initial:
         v0[6:12] = initial["top_velocity"]
@@ -263,10 +282,43 @@ def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
     return Scene(
         name=cfg.get("name", default_name), description=cfg.get("description", ""), model=model,
         visual_model=visual, halfspaces=halfspaces, contacts=contacts, anchors=anchors, q0=q0, v0=v0, kp=kp, kd=kd,
-        q_target=q_target, tau_ff=tau_ff,
+        q_target=q_target, tau_ff=tau_ff, geometry=geometry, pairs=pairs,
         duration=float(cfg.get("duration", 2.0)), dt=dt, settle_time=float(cfg.get("settle_time", 0.0)),
         mode=cfg.get("mode", "timestep"), delta=float(cfg.get("delta", 0.0)), zeta=float(cfg.get("zeta", 0.5)),
         slope_deg=slope_deg, mu=mu, config=cfg)
+
+
+def _collision_pairs(cfg: dict, model: pin.Model, mu: float):
+    """The coal geometry model and pairs of the [collision] table."""
+    import coal
+
+    col = cfg["collision"]
+    if "urdf" in cfg:
+        urdf = _resolve(cfg["urdf"])
+    elif "robot" in cfg:
+        from .robots import ROBOTS, robots_dir
+
+        urdf = robots_dir() / ROBOTS[cfg["robot"]].urdf
+    else:
+        raise ValueError("collision: needs a `robot` or `urdf` scene")
+    geometry = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION)
+    geometry.addGeometryObject(pin.GeometryObject("ground", 0, pin.SE3.Identity(),
+                                                  coal.Halfspace(np.array([0.0, 0.0, 1.0]), 0.0)))
+    for box in col.get("boxes", []):
+        place = pin.SE3(np.eye(3), np.asarray(box["position"], dtype=float))
+        geometry.addGeometryObject(pin.GeometryObject(box["name"], 0, place, coal.Box(*map(float, box["size"]))))
+    names = [g.name for g in geometry.geometryObjects]
+    pairs = []
+    for a, b in col.get("pairs", []):
+        for n in (a, b):
+            if n not in names:
+                raise ValueError(f"collision.pairs: no geometry {n!r} (known: {', '.join(names)})")
+        geometry.addCollisionPair(pin.CollisionPair(names.index(a), names.index(b)))
+        gp = _core.GeometryPairContact()
+        gp.name, gp.pair = f"{a}|{b}", len(geometry.collisionPairs) - 1
+        gp.mu, gp.max_contacts = float(col.get("mu", mu)), int(col.get("max_contacts", 4))
+        pairs.append(gp)
+    return geometry, pairs
 
 
 def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = None, q0=None, *,

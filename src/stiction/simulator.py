@@ -76,13 +76,18 @@ class Simulator:
         self.scene = load_scene(scene) if isinstance(scene, str) else scene
         self.settings = self.scene.settings(**overrides)
         sc = self.scene
-        self.model = _core.SimulatorModel(sc.model, sc.halfspaces, sc.contacts, sc.anchors, self.settings)
+        self.model = _core.SimulatorModel(sc.model, sc.halfspaces, sc.contacts, sc.anchors, self.settings,
+                                          sc.geometry, sc.pairs)
         self.data = _core.SimulatorData(self.model)
         self.reset()
 
     @property
     def contact_names(self) -> list[str]:
-        return [c.name for c in self.scene.contacts]
+        """Candidates: the sphere/point contacts, then max_contacts slots per coal pair."""
+        names = [c.name for c in self.scene.contacts]
+        for p in self.scene.pairs:
+            names += [f"{p.name}#{k}" for k in range(p.max_contacts)]
+        return names
 
     def reset(self) -> None:
         sc, d = self.scene, self.data
@@ -127,7 +132,7 @@ class Simulator:
         return self._trajectory(rec)
 
     def _trajectory(self, rec: dict) -> Trajectory:
-        nc = len(self.scene.contacts)
+        nc = self.model.num_candidates
         n = len(rec["t"])
         return Trajectory(
             scene=self.scene.name, contact_names=self.contact_names, t=rec["t"], q=rec["q"], v=rec["v"],
@@ -166,6 +171,7 @@ class Simulator:
         if free and after.sum() >= 3:
             vx = [pin.Quaternion(q[3:7]).matrix()[0] @ v[:3] for q, v in zip(traj.q[after], traj.v[after])]
             accel = float(np.polyfit(traj.t[after], vx, 1)[0])
+        ns = len(sc.contacts)  # sphere/point contacts (centres known); coal slots follow
         # foot slip after settling, for the contacts that stay closed: the distance the
         # contact point slid (integral of the tangential contact velocity: rolling is
         # not slip), and the horizontal displacement of the sphere centre (the peers'
@@ -175,9 +181,11 @@ class Simulator:
         if closed.any():
             speed = np.linalg.norm(traj.contact_velocity[after][:, closed, :2], axis=-1)
             slip = float((speed[1:] * traj.dt[after][1:, None]).sum(axis=0).max())
-            centers = self.contact_centers(traj)
-            disp = centers[after][:, closed, :2] - centers[i0][closed, :2]
-            displacement = float(np.linalg.norm(disp, axis=-1).max())
+            sphere_closed = closed[:ns]
+            if sphere_closed.any():
+                centers = self.contact_centers(traj)
+                disp = centers[after][:, sphere_closed, :2] - centers[i0][sphere_closed, :2]
+                displacement = float(np.linalg.norm(disp, axis=-1).max())
         tim = np.median(traj.timings[1:], axis=0) if len(traj.t) > 1 else np.zeros(5)
         return {
             "scene": sc.name,
@@ -188,7 +196,8 @@ class Simulator:
             "contacts": len(sc.contacts),
             "us_per_step": float(tim[4]),
             "us_per_phase": {p: float(x) for p, x in zip(PHASES[:4], tim[:4])},
-            "max_penetration": float(max(0.0, -traj.gaps.min())) if traj.gaps.size else 0.0,
+            "max_penetration": float(max(0.0, -np.nanmin(np.where(np.isfinite(traj.gaps), traj.gaps, np.nan))))
+            if np.isfinite(traj.gaps).any() else 0.0,
             "max_residual": float(traj.residual.max()),
             "all_converged": bool(traj.converged[1:].all()) if len(traj.t) > 1 else True,
             "settle_time": sc.settle_time,

@@ -27,10 +27,20 @@ std::vector<T> listOf(const bp::object& seq, const char* what) {
 
 std::shared_ptr<SimulatorModel> makeSimulatorModel(const pinocchio::Model& model, const bp::object& halfspaces,
                                                    const bp::object& contacts, const bp::object& anchors,
-                                                   const SimulatorSettings& settings) {
+                                                   const SimulatorSettings& settings, const bp::object& geometry,
+                                                   const bp::object& pairs) {
+  std::vector<GeometryPairContact> pair_list = listOf<GeometryPairContact>(pairs, "pairs");
+  if (geometry.is_none()) {
+    if (!pair_list.empty()) throw std::invalid_argument("pairs need a geometry model");
+    return std::make_shared<SimulatorModel>(model, listOf<HalfSpace>(halfspaces, "halfspaces"),
+                                            listOf<SphereContact>(contacts, "contacts"),
+                                            listOf<PointAnchor>(anchors, "anchors"), settings);
+  }
+  bp::extract<const pinocchio::GeometryModel&> g(geometry);
+  if (!g.check()) throw std::invalid_argument("geometry must be a pinocchio.GeometryModel");
   return std::make_shared<SimulatorModel>(model, listOf<HalfSpace>(halfspaces, "halfspaces"),
                                           listOf<SphereContact>(contacts, "contacts"),
-                                          listOf<PointAnchor>(anchors, "anchors"), settings);
+                                          listOf<PointAnchor>(anchors, "anchors"), settings, g(), pair_list);
 }
 
 std::shared_ptr<SimulatorData> makeSimulatorData(const SimulatorModel& sim) {
@@ -120,7 +130,7 @@ bp::dict rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int e
   if (n_steps < 0) throw std::invalid_argument("rollout: n_steps must be >= 0");
   if (every < 1) throw std::invalid_argument("rollout: record_every must be >= 1");
   const int records = n_steps / every + 1;
-  const int nc = static_cast<int>(sim.contacts.size());
+  const int nc = sim.numCandidates();
   const int na = static_cast<int>(sim.anchors.size());
   Eigen::VectorXd t(records), residual(records), iterations(records), converged(records), dts(records);
   Eigen::MatrixXd q(records, sim.model.nq), v(records, sim.model.nv), lam(records, 3 * nc), gaps(records, nc),
@@ -183,6 +193,7 @@ void setMaxIt(SimulatorSettings& s, int x) { s.solver_settings.max_iterations = 
 int nq(const SimulatorModel& s) { return s.model.nq; }
 int nv(const SimulatorModel& s) { return s.model.nv; }
 long ncontacts(const SimulatorModel& s) { return static_cast<long>(s.contacts.size()); }
+long ncandidates(const SimulatorModel& s) { return s.numCandidates(); }
 long nanchors(const SimulatorModel& s) { return static_cast<long>(s.anchors.size()); }
 bp::list halfspacesOf(const SimulatorModel& s) {
   bp::list out;
@@ -215,6 +226,12 @@ void exposeSimulator() {
       .def_readwrite("halfspace", &SphereContact::halfspace)
       .def_readwrite("mu", &SphereContact::mu)
       .def_readwrite("planar", &SphereContact::planar, "2 rows (t1, n) instead of 3");
+  bp::class_<GeometryPairContact>("GeometryPairContact",
+                                  "A collision pair of the GeometryModel handled by coal (general shapes).")
+      .def_readwrite("name", &GeometryPairContact::name)
+      .def_readwrite("pair", &GeometryPairContact::pair, "index into GeometryModel.collisionPairs")
+      .def_readwrite("mu", &GeometryPairContact::mu)
+      .def_readwrite("max_contacts", &GeometryPairContact::max_contacts);
   bp::class_<PointAnchor>("PointAnchor", "A frame point held at a world point: 3 bilateral rows.")
       .def_readwrite("name", &PointAnchor::name)
       .def_readwrite("frame", &PointAnchor::frame)
@@ -241,11 +258,13 @@ void exposeSimulator() {
       bp::no_init)
       .def("__init__", bp::make_constructor(&makeSimulatorModel, bp::default_call_policies(),
                                             (bp::arg("model"), bp::arg("halfspaces"), bp::arg("contacts"),
-                                             bp::arg("anchors"), bp::arg("settings"))))
+                                             bp::arg("anchors"), bp::arg("settings"),
+                                             bp::arg("geometry") = bp::object(), bp::arg("pairs") = bp::list())))
       .add_property("nq", &nq)
       .add_property("nv", &nv)
       .add_property("num_contacts", &ncontacts)
       .add_property("num_anchors", &nanchors)
+      .add_property("num_candidates", &ncandidates, "sphere contacts + max_contacts slots per coal pair")
       .add_property("halfspaces", &halfspacesOf)
       .add_property("contacts", &contactsOf)
       .add_property("settings", &settingsOf);

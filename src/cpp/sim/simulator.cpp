@@ -4,11 +4,14 @@
 
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
 #include <pinocchio/algorithm/cholesky.hpp>
 #include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/geometry.hpp>
+#include <pinocchio/collision/collision.hpp>
 #include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
@@ -38,16 +41,37 @@ void completeTangents(HalfSpace& h) {
 
 int rowsOf(const SphereContact& c) { return c.planar ? 2 : 3; }
 
+// Rows and friction of candidate i (a sphere contact or a pair slot).
+int candidateRows(const SimulatorModel& sim, int i) {
+  return sim.slot_pair[i] < 0 ? rowsOf(sim.contacts[i]) : 3;
+}
+double candidateMu(const SimulatorModel& sim, int i) {
+  return sim.slot_pair[i] < 0 ? sim.contacts[i].mu : sim.pairs[sim.slot_pair[i]].mu;
+}
+bool candidatePlanar(const SimulatorModel& sim, int i) {
+  return sim.slot_pair[i] < 0 && sim.contacts[i].planar;
+}
+
+// A right-handed (t1, t2, n) basis from a unit normal.
+void tangentsOf(const Eigen::Vector3d& n, Eigen::Vector3d& t1, Eigen::Vector3d& t2) {
+  const Eigen::Vector3d e = std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  t1 = (e - n * n.dot(e)).normalized();
+  t2 = n.cross(t1);
+}
+
 }  // namespace
 
 SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfSpace> halfspaces_,
                                std::vector<SphereContact> contacts_, std::vector<PointAnchor> anchors_,
-                               SimulatorSettings settings_)
+                               SimulatorSettings settings_, const pinocchio::GeometryModel& geometry_,
+                               std::vector<GeometryPairContact> pairs_)
     : model(model_),
       halfspaces(std::move(halfspaces_)),
       contacts(std::move(contacts_)),
       anchors(std::move(anchors_)),
-      settings(std::move(settings_)) {
+      settings(std::move(settings_)),
+      geometry(geometry_),
+      pairs(std::move(pairs_)) {
   for (HalfSpace& h : halfspaces) completeTangents(h);
   const auto nframes = static_cast<pinocchio::FrameIndex>(model.nframes);
   for (const HalfSpace& h : halfspaces)
@@ -83,10 +107,25 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
   makeSolver(s.solver);  // throws on an unknown name
   for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
     if (model.joints[j].shortname() == "JointModelFreeFlyer") free_flyers.push_back(j);
+  slot_pair.assign(contacts.size(), -1);
+  for (std::size_t p = 0; p < pairs.size(); ++p) {
+    const GeometryPairContact& g = pairs[p];
+    if (g.pair >= geometry.collisionPairs.size())
+      throw std::invalid_argument("pair '" + g.name + "': collision pair index " + std::to_string(g.pair) +
+                                  " does not exist (the geometry model has " +
+                                  std::to_string(geometry.collisionPairs.size()) + " pairs)");
+    if (!(g.mu >= 0.0) || !std::isfinite(g.mu))
+      throw std::invalid_argument("pair '" + g.name + "': friction coefficient mu must be finite and >= 0");
+    if (g.max_contacts < 1 || g.max_contacts > 64)
+      throw std::invalid_argument("pair '" + g.name + "': max_contacts must be in 1..64");
+    for (int k = 0; k < g.max_contacts; ++k) slot_pair.push_back(static_cast<int>(p));
+  }
+  num_candidates = static_cast<int>(slot_pair.size());
 }
 
 SimulatorData::SimulatorData(const SimulatorModel& sim)
     : data(sim.model),
+      geometry_data(sim.geometry),
       q(pinocchio::neutral(sim.model)),
       v(Eigen::VectorXd::Zero(sim.model.nv)),
       solver(makeSolver(sim.settings.solver)) {
@@ -96,18 +135,26 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
   control.q_target = q;
   control.v_target = Eigen::VectorXd::Zero(nv);
   control.tau_ff = Eigen::VectorXd::Zero(nv);
-  gaps = Eigen::VectorXd::Zero(sim.contacts.size());
+  const int nc = sim.numCandidates();
+  gaps = Eigen::VectorXd::Zero(nc);
+  slot_point = slot_normal = slot_t1 = slot_t2 = Eigen::Matrix3Xd::Zero(3, nc);
+  for (const GeometryPairContact& g : sim.pairs) {
+    coal::CollisionRequest& req = geometry_data.collisionRequests[g.pair];
+    req.num_max_contacts = static_cast<size_t>(g.max_contacts);
+    req.security_margin = sim.settings.activation_distance;
+    req.enable_contact = true;
+  }
   J6.resize(6, nv);
   tau.resize(nv);
   nle.resize(nv);
   zero_nv = Eigen::VectorXd::Zero(nv);
   v_free.resize(nv);
   dv.resize(nv);
-  candidate_lambda = Eigen::MatrixXd::Zero(3, sim.contacts.size());
-  have_candidate_lambda.assign(sim.contacts.size(), false);
+  candidate_lambda = Eigen::MatrixXd::Zero(3, nc);
+  have_candidate_lambda.assign(nc, false);
   anchor_lambda = Eigen::MatrixXd::Zero(3, sim.anchors.size());
-  candidate_velocity = Eigen::MatrixXd::Zero(3, sim.contacts.size());
-  candidate_states.assign(sim.contacts.size(), ContactState::kOpen);
+  candidate_velocity = Eigen::MatrixXd::Zero(3, nc);
+  candidate_states.assign(nc, ContactState::kOpen);
 }
 
 void computeControl(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
@@ -197,6 +244,37 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
       rows += rowsOf(c);
     }
   }
+  // coal pairs: each reported point (signed distance below the activation
+  // distance) fills the pair's next slot.
+  if (!sim.pairs.empty()) {
+    pinocchio::updateGeometryPlacements(model, data, sim.geometry, sd.geometry_data);
+    int slot = static_cast<int>(sim.contacts.size());
+    for (const GeometryPairContact& g : sim.pairs) {
+      coal::CollisionResult& res = sd.geometry_data.collisionResults[g.pair];
+      res.clear();
+      pinocchio::computeCollision(sim.geometry, sd.geometry_data, g.pair);
+      const int found = std::min<int>(static_cast<int>(res.numContacts()), g.max_contacts);
+      for (int k = 0; k < g.max_contacts; ++k, ++slot) {
+        if (k >= found) {
+          sd.gaps[slot] = std::numeric_limits<double>::infinity();
+          continue;
+        }
+        const coal::Contact& c = res.getContact(static_cast<size_t>(k));
+        sd.gaps[slot] = c.penetration_depth;  // signed distance (coal 3: < 0 overlapping)
+        const Eigen::Vector3d n = c.normal.normalized();  // from the pair's first geometry to its second
+        sd.slot_normal.col(slot) = n;
+        sd.slot_point.col(slot) = c.pos;
+        Eigen::Vector3d t1, t2;
+        tangentsOf(n, t1, t2);
+        sd.slot_t1.col(slot) = t1;
+        sd.slot_t2.col(slot) = t2;
+        if (sd.gaps[slot] <= sim.settings.activation_distance) {
+          sd.active.push_back(slot);
+          rows += 3;
+        }
+      }
+    }
+  }
   const int nv = model.nv;
   if (sd.J.rows() != rows) {  // allocation only when the active set changes size
     sd.J.resize(rows, nv);
@@ -209,8 +287,47 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
   sd.tangent_row.setZero();
 
   // Contact frames, Jacobians J (rows t1, t2, n), drifts J' v and gaps Psi.
+  sd.frame_turn.setZero(nv);
+  for (pinocchio::JointIndex j : sim.free_flyers) {
+    const int iv = model.idx_vs[j];
+    sd.frame_turn.segment<3>(iv) = v.segment<3>(iv + 3).cross(v.segment<3>(iv));
+  }
   Eigen::Index row = 0;
   for (int i : sd.active) {
+    if (sim.slot_pair[i] >= 0) {
+      // coal contact: relative velocity of geometry 2's material point w.r.t. geometry 1's
+      const pinocchio::CollisionPair& cp = sim.geometry.collisionPairs[sim.pairs[sim.slot_pair[i]].pair];
+      const pinocchio::JointIndex j1 = sim.geometry.geometryObjects[cp.first].parentJoint;
+      const pinocchio::JointIndex j2 = sim.geometry.geometryObjects[cp.second].parentJoint;
+      const Eigen::Vector3d p = sd.slot_point.col(i), n = sd.slot_normal.col(i);
+      const Eigen::Vector3d t1 = sd.slot_t1.col(i), t2 = sd.slot_t2.col(i);
+      sd.Jrel.setZero(3, nv);
+      for (int side = 0; side < 2; ++side) {
+        const pinocchio::JointIndex j = side == 0 ? j2 : j1;
+        if (j == 0) continue;  // fixed in the world
+        const double sign = side == 0 ? 1.0 : -1.0;
+        const pinocchio::SE3 at(Eigen::Matrix3d::Identity(), data.oMi[j].actInv(p));
+        sd.J6.setZero();
+        pinocchio::getFrameJacobian(model, data, j, at, pinocchio::LOCAL_WORLD_ALIGNED, sd.J6);
+        sd.Jrel += sign * sd.J6.topRows<3>();
+      }
+      // The drift of a coal row is that of a motion whose free-flyer origins keep
+      // their world velocity (J c, c = omega x v on each free flyer's linear rows):
+      // the material points' accelerations are not the gap's (a rolling sphere's
+      // contact point accelerates towards its centre while the gap stays 0), and for
+      // general shapes the gap's curvature terms are not available; the position
+      // term Psi / delta^2 keeps the constraint.
+      sd.J.row(row) = t1.transpose() * sd.Jrel;
+      sd.drift[row] = sd.J.row(row).dot(sd.frame_turn);
+      sd.tangent_row[row++] = 1.0;
+      sd.J.row(row) = t2.transpose() * sd.Jrel;
+      sd.drift[row] = sd.J.row(row).dot(sd.frame_turn);
+      sd.tangent_row[row++] = 1.0;
+      sd.J.row(row) = n.transpose() * sd.Jrel;
+      sd.drift[row] = sd.J.row(row).dot(sd.frame_turn);
+      sd.position_error[row++] = sd.gaps[i];
+      continue;
+    }
     const SphereContact& c = sim.contacts[i];
     const pinocchio::Frame& f = model.frames[c.frame];
     const HalfSpace& h = sim.halfspaces[c.halfspace];
@@ -313,10 +430,9 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   // Rebuild the problem only when the active set changed.
   if (!sd.problem || sd.active != sd.problem_active) {
     std::vector<Constraint> cons;
-    for (int i : sd.active) {
-      const SphereContact& c = sim.contacts[i];
-      cons.push_back(c.planar ? Constraint::planarFriction(c.mu) : Constraint::spatialFriction(c.mu));
-    }
+    for (int i : sd.active)
+      cons.push_back(candidatePlanar(sim, i) ? Constraint::planarFriction(candidateMu(sim, i))
+                                             : Constraint::spatialFriction(candidateMu(sim, i)));
     for (std::size_t a = 0; a < sim.anchors.size(); ++a) cons.push_back(Constraint::bilateral(3));
     sd.delassus = std::make_shared<DenseDelassus>(sd.A);
     sd.problem = std::make_unique<ContactProblem>(sd.delassus, scale * sd.b, std::move(cons), 1e-6);
@@ -334,7 +450,7 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   bool any = false;
   Eigen::Index row = 0;
   for (int i : sd.active) {
-    const int k = rowsOf(sim.contacts[i]);
+    const int k = candidateRows(sim, i);
     if (sd.have_candidate_lambda[i]) {
       any = true;
       if (k == 3)
@@ -356,7 +472,7 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     throw std::runtime_error("contact solve returned non-finite impulses at t = " + std::to_string(sd.t));
   // Per-candidate forces (lambda / scale) and states.
   sd.lambda = sd.result.lam / scale;
-  for (std::size_t i = 0; i < sim.contacts.size(); ++i) {
+  for (int i = 0; i < sim.numCandidates(); ++i) {
     sd.candidate_lambda.col(i).setZero();
     sd.have_candidate_lambda[i] = false;
     sd.candidate_states[i] = ContactState::kOpen;
@@ -364,7 +480,7 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   row = 0;
   for (std::size_t blk = 0; blk < sd.active.size(); ++blk) {
     const int i = sd.active[blk];
-    const int k = rowsOf(sim.contacts[i]);
+    const int k = candidateRows(sim, i);
     if (k == 3)
       sd.candidate_lambda.col(i) = sd.lambda.segment<3>(row);
     else
@@ -567,7 +683,7 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
     if (sim.settings.mode != IntegrationMode::kTimeStepping) sd.row_velocity.noalias() = sd.J * sd.v;
     Eigen::Index row = 0;
     for (int i : sd.active) {
-      if (sim.contacts[i].planar) {
+      if (candidatePlanar(sim, i)) {
         sd.candidate_velocity.col(i) << sd.row_velocity[row], 0.0, sd.row_velocity[row + 1];
         row += 2;
       } else {

@@ -22,6 +22,7 @@
 #include <vector>
 
 #include <pinocchio/multibody/data.hpp>
+#include <pinocchio/multibody/geometry.hpp>
 #include <pinocchio/multibody/model.hpp>
 
 #include "stiction/contact_problem.hpp"
@@ -53,6 +54,18 @@ struct SphereContact {
   int halfspace = 0;
   double mu = 0.5;
   bool planar = false;  ///< planar scenes: 2 rows (t1, n) instead of 3
+};
+
+/// A collision pair of the scene's GeometryModel handled by coal: general shapes
+/// (meshes, boxes, capsules, ...). Each step coal reports up to `max_contacts`
+/// points (signed distance below the activation distance); each becomes a
+/// spatial friction contact with the normal coal gives (from the pair's first
+/// geometry to its second). Velocities are relative between the two bodies.
+struct GeometryPairContact {
+  std::string name;
+  pinocchio::PairIndex pair = 0;  ///< index into GeometryModel::collisionPairs
+  double mu = 0.5;
+  int max_contacts = 4;
 };
 
 /// A point of frame `frame` (at `offset`) held at the world point `target`:
@@ -92,14 +105,23 @@ class SimulatorModel {
  public:
   SimulatorModel(const pinocchio::Model& model, std::vector<HalfSpace> halfspaces,
                  std::vector<SphereContact> contacts, std::vector<PointAnchor> anchors,
-                 SimulatorSettings settings);
+                 SimulatorSettings settings, const pinocchio::GeometryModel& geometry = {},
+                 std::vector<GeometryPairContact> pairs = {});
 
   pinocchio::Model model;
   std::vector<HalfSpace> halfspaces;
   std::vector<SphereContact> contacts;
   std::vector<PointAnchor> anchors;
   SimulatorSettings settings;
-  std::vector<pinocchio::JointIndex> free_flyers;  ///< derived: the free-flyer joints
+  pinocchio::GeometryModel geometry;       ///< shapes for the coal pairs (may be empty)
+  std::vector<GeometryPairContact> pairs;
+
+  // derived
+  std::vector<pinocchio::JointIndex> free_flyers;
+  /// Candidates: the sphere contacts, then max_contacts slots per pair.
+  int numCandidates() const { return num_candidates; }
+  int num_candidates = 0;
+  std::vector<int> slot_pair;  ///< per candidate: -1 for a sphere contact, else its pair
 };
 
 /// Microseconds spent per phase in the last step (summed over RHS evaluations in ODE modes).
@@ -149,11 +171,16 @@ class SimulatorData {
   double last_dt = 0.0;  ///< the step actually taken
   double next_dt = 0.0;  ///< adaptive mode: the proposal for the next step
 
+  // coal pairs: geometry placements, results, and the contact each slot holds now
+  pinocchio::GeometryData geometry_data;
+  Eigen::Matrix3Xd slot_point, slot_normal, slot_t1, slot_t2;  ///< per candidate (pair slots only)
+
   // Workspace, reused from step to step.
   Eigen::MatrixXd W, J6, Jrel;  ///< W = D^-1/2 U^-1 J^T (M = U D U^T)
   Eigen::Matrix3Xd plane_normal, plane_t1, plane_t2;  ///< world axes of each half-space
   Eigen::VectorXd plane_offset;
   Eigen::VectorXd tau, nle, v_free, dv, guess, q_tmp, row_velocity, zero_nv, b_scaled;
+  Eigen::VectorXd frame_turn;  ///< omega x v on each free flyer's linear rows, 0 elsewhere
   std::shared_ptr<DenseDelassus> delassus;
   std::unique_ptr<ContactProblem> problem;
   std::vector<int> problem_active;
