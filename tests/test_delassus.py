@@ -134,3 +134,32 @@ def test_unit_impulse_response_is_a_column_of_A(solo):
         e[i] = 1.0
         ddq = pin.aba(model, data, q, np.zeros(model.nv), J.T @ e)
         np.testing.assert_allclose(J @ ddq, A[:, i], rtol=1e-9, atol=1e-10 * np.abs(A).max())
+
+
+def test_equals_pinocchio_constraint_cholesky_route(solo):
+    """Pinocchio's constraint Cholesky (ContactCholeskyDecomposition on point contacts, the
+    route its own solvers use) gives the same Delassus operator, up to its 1e-12 damping."""
+    sim, q = solo
+    d = built(sim, q)
+    model = sim.scene.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    pin.computeJointJacobians(model, data, q)
+    pin.crba(model, data, q)
+    cms = pin.StdVec_ConstraintModel()
+    for i in d.active:
+        c = sim.scene.contacts[i]
+        frame = model.frames[c.frame]
+        j = frame.parentJoint
+        p_world = data.oMi[j].act(frame.placement.act(np.asarray(c.offset))) - c.radius * np.array([0, 0, 1.0])
+        cms.append(pin.PointContactConstraintModel(model, 0, pin.SE3(np.eye(3), p_world), j,
+                                                   pin.SE3(np.eye(3), data.oMi[j].actInv(p_world))))
+    cds = pin.StdVec_ConstraintData()
+    for cm in cms:
+        cds.append(cm.createData())
+    for cm, cd in zip(cms, cds):
+        cm.calc(model, data, cd)  # required before the decomposition (Pinocchio 4.1)
+    chol = pin.ContactCholeskyDecomposition(model, data, cms, cds)
+    chol.compute(model, data, cms, cds, 1e-12)
+    G = chol.getDelassusOperatorCholeskyExpression().matrix()
+    np.testing.assert_allclose(d.A, G, atol=1e-10 * np.abs(G).max())
