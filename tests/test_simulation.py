@@ -248,3 +248,22 @@ def test_ball_lands_and_rests_on_a_table_through_coal():
     assert traj.lam[-1, 1, 2] == pytest.approx(0.5 * G, rel=1e-9)
     assert np.isinf(traj.gaps[-1, 0]) or traj.gaps[-1, 0] > 0.1  # ground: far below
     assert s["max_penetration"] <= 1e-6
+
+
+def test_user_model_with_coal_pairs():
+    """A user's pinocchio.Model and collision GeometryModel (a ball), its contact with the
+    ground handled by coal: at rest the ground carries m g."""
+    import pinocchio as pin
+
+    from stiction.scene import ROBOTS_DIR, scene_from_model
+
+    urdf = str(ROBOTS_DIR / "ball.urdf")
+    model = pin.buildModelFromUrdf(urdf, pin.JointModelFreeFlyer())
+    collision = pin.buildGeomFromUrdf(model, urdf, pin.GeometryType.COLLISION)
+    q0 = pin.neutral(model)
+    q0[2] = 0.05
+    scene = scene_from_model(model, None, q0, collision_model=collision, pairs=[("ball_0", "ground")],
+                             place_on_ground=False, max_contacts=1)
+    traj = Simulator(scene).rollout(0.2)
+    assert traj.lam[-1, 0, 2] == pytest.approx(0.5 * G, rel=1e-9)
+    assert abs(traj.q[-1, 2] - 0.05) <= 1e-12

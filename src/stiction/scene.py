@@ -324,11 +324,14 @@ def _collision_pairs(cfg: dict, model: pin.Model, mu: float):
 def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = None, q0=None, *,
                      name: str = "model", spheres=(), mu: float = 0.5, slope_deg: float = 0.0, kp: float = 0.0,
                      kd: float = 0.0, dt: float = 1e-3, duration: float = 1.0, settle_time: float = 0.0,
-                     place_on_ground: bool = True) -> Scene:
-    """A scene from the pinocchio.Model (and GeometryModel) you already have.
+                     place_on_ground: bool = True, collision_model: pin.GeometryModel | None = None,
+                     pairs=(), max_contacts: int = 4) -> Scene:
+    """A scene from the pinocchio.Model (and GeometryModels) you already have.
 
     spheres: (frame name, radius) or (frame name, radius, offset) contact spheres against the
-    ground z = 0. With place_on_ground the free-flyer base is lowered so the lowest sphere touches.
+    ground z = 0 (the analytic path). pairs: (geometry name, geometry name) of `collision_model`
+    handled by coal; the name "ground" is the plane z = 0 (added to a copy of the model).
+    With place_on_ground the free-flyer base is lowered so the lowest sphere touches.
     """
     model = model.copy()
     visual_model = visual_model if visual_model is not None else pin.GeometryModel()
@@ -352,11 +355,31 @@ def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = 
     start = 6 if free else 0
     kpv, kdv = np.zeros(model.nv), np.zeros(model.nv)
     kpv[start:], kdv[start:] = kp, kd
+    geometry, pair_list = None, []
+    if pairs:
+        import coal
+
+        if collision_model is None:
+            raise ValueError("pairs need a collision_model (a pinocchio.GeometryModel)")
+        geometry = collision_model.copy()
+        names = [g.name for g in geometry.geometryObjects]
+        if "ground" not in names:
+            geometry.addGeometryObject(pin.GeometryObject("ground", 0, pin.SE3.Identity(),
+                                                          coal.Halfspace(np.array([0.0, 0.0, 1.0]), 0.0)))
+            names.append("ground")
+        for a, b in pairs:
+            for n in (a, b):
+                if n not in names:
+                    raise ValueError(f"pairs: no geometry {n!r} in the collision model")
+            geometry.addCollisionPair(pin.CollisionPair(names.index(a), names.index(b)))
+            gp = _core.GeometryPairContact()
+            gp.name, gp.pair, gp.mu, gp.max_contacts = f"{a}|{b}", len(geometry.collisionPairs) - 1, mu, max_contacts
+            pair_list.append(gp)
     return Scene(name=name, description="built from a pinocchio.Model", model=model, visual_model=visual_model,
                  halfspaces=[_halfspace("ground", (0, 0, 1), 0.0)], contacts=contacts, anchors=[], q0=q,
                  v0=np.zeros(model.nv), kp=kpv, kd=kdv, q_target=q.copy(), tau_ff=np.zeros(model.nv),
                  duration=duration, dt=dt, settle_time=settle_time, mode="timestep", delta=0.0, zeta=0.5,
-                 slope_deg=slope_deg, mu=mu)
+                 slope_deg=slope_deg, mu=mu, geometry=geometry, pairs=pair_list)
 
 
 def _stacked_bodies(paths: list[str], mu: float, halfspaces: list):
