@@ -274,9 +274,9 @@ def headline_table(cases: list[Case], results: dict[str, dict[Config, Measuremen
     lines = [
         "## Headline",
         "",
-        f"stiction: `default` at ε=1e-10. ADMM, PGS: the faster of their two configurations that "
-        f"solves the problem, else the more accurate one (ε column). Ratio: stiction / ADMM time, "
-        f"only where both solve.",
+        "stiction: `default` at ε=1e-10. ADMM, PGS: the faster of their two configurations that "
+        "solves the problem, else the more accurate one (ε column). Ratio: stiction / ADMM time, "
+        "only where both solve.",
         "",
         "| problem | rows | asym | stiction µs | residual | ADMM ε | ADMM µs | residual | claim "
         "| PGS ε | PGS µs | residual | claim | stiction/ADMM |",

@@ -8,7 +8,6 @@ import os
 import sys
 from pathlib import Path
 
-import numpy as np
 
 from . import fclib, solver_names, solve
 
@@ -119,7 +118,7 @@ def cmd_demo(args) -> int:
                 "expected_sliding_acceleration")
         for k in keys:
             print(f"   {k:36s} {summary[k]:.4g}" if isinstance(summary[k], float) else f"   {k:36s} {summary[k]}")
-        print(f"   µs per phase: " + ", ".join(f"{k} {v:.2f}" for k, v in summary["us_per_phase"].items()))
+        print("   µs per phase: " + ", ".join(f"{k} {v:.2f}" for k, v in summary["us_per_phase"].items()))
         print(f"   recording {html}   plot {png}\n")
 
     root = bundled_fclib_dir()

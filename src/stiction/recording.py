@@ -9,7 +9,6 @@ sticks, red while it slips; an open contact's arrows shrink to nothing).
 """
 from __future__ import annotations
 
-import base64
 import math
 import os
 from pathlib import Path

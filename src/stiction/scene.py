@@ -38,7 +38,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import _core
-from .robots import ROBOTS, load_robot, load_urdf
+from .robots import load_robot, load_urdf
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "robots" / "scenes"
 ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
@@ -109,7 +109,7 @@ def _resolve(path: str) -> Path:
     raise FileNotFoundError(f"{path}: not found (relative paths are looked up in {ROBOTS_DIR})")
 
 
-def _box_half_extents(visual_model: pin.GeometryModel, frame_name: str) -> np.ndarray | None:
+def _box_half_extents(visual_model: pin.GeometryModel) -> np.ndarray | None:
     import coal
 
     for go in visual_model.geometryObjects:
@@ -193,10 +193,9 @@ def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
             for frame_name, offset in spec.points:
                 contacts.append(_sphere(f"{frame_name}{offset}", model.getFrameId(frame_name), offset, 0.0, 0, mu))
         if contacts_cfg.get("box_corners", False):
-            half = _box_half_extents(visual, "")
+            half = _box_half_extents(visual)
             if half is None:
                 raise ValueError("contacts.box_corners: the URDF has no box visual")
-            frame = model.getFrameId(model.names[1]) if model.njoints > 1 else 0
             body_frame = next(i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY)
             for k, corner in enumerate(_corners(half)):
                 contacts.append(_sphere(f"corner{k}", body_frame, corner, 0.0, 0, mu))
@@ -394,7 +393,7 @@ def _stacked_bodies(paths: list[str], mu: float, halfspaces: list):
     below_half = None
     for k, path in enumerate(paths):
         body = load_urdf(_resolve(path), True, name=f"body{k}")
-        half = _box_half_extents(body.visual_model, "")
+        half = _box_half_extents(body.visual_model)
         if half is None:
             raise ValueError(f"{path}: stacked bodies must be boxes")
         # prefix names so several copies can coexist
