@@ -267,3 +267,43 @@ def test_user_model_with_coal_pairs():
     traj = Simulator(scene).rollout(0.2)
     assert traj.lam[-1, 0, 2] == pytest.approx(0.5 * G, rel=1e-9)
     assert abs(traj.q[-1, 2] - 0.05) <= 1e-12
+
+
+def test_closed_loop_truss_hangs_still():
+    """A closed loop (paper §3: bilateral rows): two 0.5 m rods pinned to the world 0.6 m
+    apart and to each other at their free ends form a triangle with the ground. At its
+    equilibrium nothing moves, the loop stays closed, and the world pins carry 2 m g."""
+    import pinocchio as pin
+
+    from stiction import _core
+    from stiction.scene import scene_from_model
+
+    inertia = pin.Inertia(1.0, np.zeros(3), np.diag([6.67e-5, 0.0208667, 0.0208667]))
+    model = pin.Model()
+    for k in range(2):
+        j = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), f"rod{k}_joint")
+        model.appendBodyToJoint(j, inertia, pin.SE3.Identity())
+        model.addBodyFrame(f"rod{k}", j, pin.SE3.Identity(), 0)
+    q0 = np.zeros(model.nq)
+    pivots = [np.array([0.0, 0.0, 1.0]), np.array([0.6, 0.0, 1.0])]
+    for k, (pivot, phi) in enumerate(zip(pivots, (math.atan2(0.8, 0.6), math.atan2(0.8, -0.6)))):
+        R = pin.utils.rotate("y", phi)  # the rod's x axis from its pivot towards the joint at (0.3, 0, 0.6)
+        q0[7 * k: 7 * k + 3] = pivot + 0.25 * R[:, 0]
+        q0[7 * k + 3: 7 * k + 7] = pin.Quaternion(R).coeffs()
+    scene = scene_from_model(model, None, q0, place_on_ground=False, duration=1.0)
+    for k, pivot in enumerate(pivots):
+        a = _core.PointAnchor()
+        a.name, a.frame, a.offset, a.target = f"pin{k}", model.getFrameId(f"rod{k}"), np.array([-0.25, 0, 0]), pivot
+        scene.anchors.append(a)
+    loop = _core.PointAnchor()
+    loop.name, loop.frame, loop.offset = "loop", model.getFrameId("rod0"), np.array([0.25, 0, 0])
+    loop.frame2, loop.offset2 = model.getFrameId("rod1"), np.array([0.25, 0, 0])
+    scene.anchors.append(loop)
+    sim = Simulator(scene)
+    traj = sim.rollout(1.0, record_every=100)
+    assert traj.converged[1:].all()
+    assert np.abs(traj.v).max() <= 1e-9
+    np.testing.assert_allclose(traj.q[-1], q0, atol=1e-9)
+    forces = np.asarray(sim.data.anchor_lambda).reshape(3, -1)
+    assert forces[2, :2].sum() == pytest.approx(2 * G, rel=1e-9)  # the world pins carry both rods
+    assert abs(forces[0, 0] + forces[0, 1]) <= 1e-8 * abs(forces[0, 0])  # horizontal pin forces cancel

@@ -20,8 +20,9 @@ Keys (all optional unless stated):
                base_xy = [x, y], drop = 0.0 (m above touch)
     [[walls]]  name, normal, offset (free space: normal . x >= offset), frames (spheres on them),
                radius, mu
-    [[anchors]] frame, offset (in the frame), target (world; default: where the point is at q0):
-               3 bilateral rows each (paper §3), e.g. a pendulum pinned to the world
+    [[anchors]] frame, offset (in the frame), target (world; default: where the point is at q0),
+               or frame2, offset2 (a point of another body: a closed loop): 3 bilateral rows
+               each (paper §3)
     [collision] general shapes through coal, for what the analytic spheres and points do not
                cover: pairs = [["geometry a", "geometry b"], ...] among the URDF's collision
                geometries, "ground" (the plane z = 0) and fixed world boxes
@@ -224,7 +225,12 @@ def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
         pa = _core.PointAnchor()
         pa.name, pa.frame = a.get("name", f"anchor{k}"), model.getFrameId(a["frame"])
         pa.offset = np.asarray(a.get("offset", (0.0, 0.0, 0.0)), dtype=float)
-        if "target" in a:
+        if "frame2" in a:  # a closed loop: held to a point of another body
+            if not model.existFrame(a["frame2"]):
+                raise ValueError(f"anchors[{k}]: no frame {a['frame2']!r} in the model")
+            pa.frame2 = model.getFrameId(a["frame2"])
+            pa.offset2 = np.asarray(a.get("offset2", (0.0, 0.0, 0.0)), dtype=float)
+        elif "target" in a:
             pa.target = np.asarray(a["target"], dtype=float)
         else:
             data = model.createData()

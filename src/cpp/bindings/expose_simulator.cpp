@@ -185,6 +185,8 @@ void setOffset(SphereContact& c, const Eigen::Vector3d& x) { c.offset = x; }
 Eigen::Vector3d getAOffset(const PointAnchor& c) { return c.offset; }
 void setAOffset(PointAnchor& c, const Eigen::Vector3d& x) { c.offset = x; }
 Eigen::Vector3d getTarget(const PointAnchor& c) { return c.target; }
+Eigen::Vector3d getAOffset2(const PointAnchor& c) { return c.offset2; }
+void setAOffset2(PointAnchor& c, const Eigen::Vector3d& x) { c.offset2 = x; }
 void setTarget(PointAnchor& c, const Eigen::Vector3d& x) { c.target = x; }
 double getTol(const SimulatorSettings& s) { return s.solver_settings.tolerance; }
 void setTol(SimulatorSettings& s, double x) { s.solver_settings.tolerance = x; }
@@ -236,7 +238,9 @@ void exposeSimulator() {
       .def_readwrite("name", &PointAnchor::name)
       .def_readwrite("frame", &PointAnchor::frame)
       .add_property("offset", &getAOffset, &setAOffset)
-      .add_property("target", &getTarget, &setTarget);
+      .add_property("target", &getTarget, &setTarget)
+      .def_readwrite("frame2", &PointAnchor::frame2, "0: hold at the world point target; else a frame")
+      .add_property("offset2", &getAOffset2, &setAOffset2);
   bp::enum_<IntegrationMode>("IntegrationMode")
       .value("timestep", IntegrationMode::kTimeStepping)
       .value("rk4", IntegrationMode::kRK4)

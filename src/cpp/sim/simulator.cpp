@@ -92,9 +92,10 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
     if (!c.offset.allFinite()) throw std::invalid_argument("contact '" + c.name + "': offset is not finite");
   }
   for (const PointAnchor& a : anchors) {
-    if (a.frame >= nframes)
-      throw std::invalid_argument("anchor '" + a.name + "': frame index " + std::to_string(a.frame) +
-                                  " does not exist");
+    if (a.frame >= nframes || a.frame2 >= nframes)
+      throw std::invalid_argument("anchor '" + a.name + "': frame index " +
+                                  std::to_string(std::max(a.frame, a.frame2)) + " does not exist");
+    if (!a.offset2.allFinite()) throw std::invalid_argument("anchor '" + a.name + "': offset2 is not finite");
     if (!a.offset.allFinite() || !a.target.allFinite())
       throw std::invalid_argument("anchor '" + a.name + "': offset and target must be finite");
   }
@@ -377,6 +378,8 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
     ++row;
   }
   for (const PointAnchor& a : sim.anchors) {
+    // point 1 (frame, offset) against point 2: the world point `target`, or with
+    // frame2 != 0 the point (frame2, offset2) of another body: a closed loop.
     const pinocchio::Frame& f = model.frames[a.frame];
     const pinocchio::JointIndex j = f.parentJoint;
     const Eigen::Vector3d point_j = f.placement.act(a.offset);
@@ -386,7 +389,22 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
     sd.J.middleRows(row, 3) = sd.J6.topRows<3>();
     sd.drift.segment<3>(row) =
         pinocchio::getFrameClassicalAcceleration(model, data, j, at_point, pinocchio::LOCAL_WORLD_ALIGNED).linear();
-    sd.position_error.segment<3>(row) = data.oMi[j].act(point_j) - a.target;
+    Eigen::Vector3d other = a.target;
+    if (a.frame2 != 0) {
+      const pinocchio::Frame& f2 = model.frames[a.frame2];
+      const pinocchio::JointIndex j2 = f2.parentJoint;
+      const Eigen::Vector3d point2_j = f2.placement.act(a.offset2);
+      other = data.oMi[j2].act(point2_j);
+      if (j2 != 0) {
+        const pinocchio::SE3 at_point2(Eigen::Matrix3d::Identity(), point2_j);
+        sd.J6.setZero();
+        pinocchio::getFrameJacobian(model, data, j2, at_point2, pinocchio::LOCAL_WORLD_ALIGNED, sd.J6);
+        sd.J.middleRows(row, 3) -= sd.J6.topRows<3>();
+        sd.drift.segment<3>(row) -=
+            pinocchio::getFrameClassicalAcceleration(model, data, j2, at_point2, pinocchio::LOCAL_WORLD_ALIGNED).linear();
+      }
+    }
+    sd.position_error.segment<3>(row) = data.oMi[j].act(point_j) - other;
     row += 3;
   }
   const auto t1 = Clock::now();

@@ -68,13 +68,16 @@ struct GeometryPairContact {
   int max_contacts = 4;
 };
 
-/// A point of frame `frame` (at `offset`) held at the world point `target`:
-/// 3 bilateral rows (paper §3, eq. 24-27), e.g. a pendulum pinned to the world.
+/// A point of frame `frame` (at `offset`) held at the world point `target`, or
+/// (frame2 != 0) at the point `offset2` of frame `frame2`: 3 bilateral rows
+/// (paper §3, eq. 24-27), e.g. a pendulum pinned to the world, or a closed loop.
 struct PointAnchor {
   std::string name;
   pinocchio::FrameIndex frame = 0;
   Eigen::Vector3d offset = Eigen::Vector3d::Zero();
   Eigen::Vector3d target = Eigen::Vector3d::Zero();
+  pinocchio::FrameIndex frame2 = 0;  ///< 0: the world point `target`
+  Eigen::Vector3d offset2 = Eigen::Vector3d::Zero();
 };
 
 enum class IntegrationMode { kTimeStepping = 0, kRK4 = 1, kAdaptive = 2 };
