@@ -106,3 +106,17 @@ def test_empty_problem_is_solved_trivially(solver, warm):
     p = ContactProblem(np.zeros((0, 0)), np.zeros(0), [])
     r = stiction.solve(p, solver=solver, warm_start=warm)
     assert r.converged and r.lam.shape == (0,) and r.residual == 0.0
+
+
+@pytest.mark.parametrize("solver", ["default", "nsgs", "newton", "admm"])
+def test_rows_that_move_nothing_get_no_force(solver):
+    """A zero diagonal block (a contact on something that cannot move) next to a real one:
+    no division by zero, the idle contact gets lambda = 0 and the other its exact value."""
+    A = np.zeros((6, 6))
+    A[3:, 3:] = np.diag([1.0, 1.0, 2.0])
+    b = np.array([0.0, 0.0, -1.0, 0.0, 0.0, 1.0])  # the idle contact separates
+    p = ContactProblem(A, b, [Constraint.spatial_friction(0.5)] * 2)
+    r = stiction.solve(p, solver=solver, tol=1e-12, max_iter=5000)
+    assert r.converged, (r.residual, r.message)
+    np.testing.assert_allclose(r.lam[:3], 0.0, atol=1e-12)
+    assert r.lam[5] == pytest.approx(0.5, rel=1e-10)

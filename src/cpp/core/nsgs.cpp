@@ -18,8 +18,11 @@ constexpr double kInfSweeps = 1e300;
 // gets the smallest diagonal shift that makes it invertible, so the local solve
 // still returns a finite answer (the global verdict is made on the true residual).
 void invertBlock(Eigen::Map<Eigen::MatrixXd> G, Eigen::Map<Eigen::MatrixXd> G_inv) {
-  const Eigen::Index k = G.rows();
-  const double scale = std::max(G.diagonal().cwiseAbs().maxCoeff(), 1e-300);
+  const double scale = G.diagonal().cwiseAbs().maxCoeff();
+  if (!(scale > 0.0)) {  // rows that move nothing (a zero block): their force stays 0
+    G_inv.setZero();
+    return;
+  }
   Eigen::MatrixXd shifted = G;
   for (double eps = 0.0;; eps = eps == 0.0 ? 1e-12 * scale : eps * 100.0) {
     shifted.diagonal() = G.diagonal().array() + eps;
@@ -31,7 +34,6 @@ void invertBlock(Eigen::Map<Eigen::MatrixXd> G, Eigen::Map<Eigen::MatrixXd> G_in
       return;
     }
   }
-  (void)k;
 }
 
 }  // namespace
