@@ -85,7 +85,7 @@ def test_rigid_solo12_slides_with_the_analytic_acceleration():
     assert s["max_normal_velocity_while_sliding"] <= 1e-9
 
 
-@pytest.mark.parametrize("scene", ["two-cube-stack", "go2-stand", "anymal-stand", "ur5-push-wall"])
+@pytest.mark.parametrize("scene", ["two-cube-stack", "go2-stand", "anymal-stand", "ur5-push-wall", "talos-stand"])
 def test_other_scenes_run_converged_without_penetration(scene):
     sim = Simulator(scene)
     traj = sim.rollout(1.0, record_every=5)
@@ -307,3 +307,21 @@ def test_closed_loop_truss_hangs_still():
     forces = np.asarray(sim.data.anchor_lambda).reshape(3, -1)
     assert forces[2, :2].sum() == pytest.approx(2 * G, rel=1e-9)  # the world pins carry both rods
     assert abs(forces[0, 0] + forces[0, 1]) <= 1e-8 * abs(forces[0, 0])  # horizontal pin forces cancel
+
+
+def test_implicit_pd_keeps_stiff_gains_stable():
+    """TALOS with kp 3000, kd 50 on light wrist and head links: the explicit PD diverges within
+    a few steps (reported as an error, never a crash); folded implicitly into the step it holds."""
+    sim = Simulator("talos-stand")
+    traj = sim.rollout(0.5, record_every=50)
+    assert traj.converged[1:].all() and (traj.states[-1] == 1).all()  # all 8 sole corners stick
+    explicit = Simulator("talos-stand")
+    s = explicit.model.settings
+    s.implicit_pd = False
+    from stiction import _core
+
+    model = _core.SimulatorModel(explicit.scene.model, explicit.scene.halfspaces, explicit.scene.contacts, [], s)
+    data = _core.SimulatorData(model)
+    data.q, data.kp, data.kd, data.q_target = explicit.scene.q0, explicit.scene.kp, explicit.scene.kd, explicit.scene.q0
+    with pytest.raises(RuntimeError, match="diverged|non-finite"):
+        _core.rollout(model, data, 500, 1)

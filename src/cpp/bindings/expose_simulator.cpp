@@ -255,6 +255,8 @@ void exposeSimulator() {
       .def_readwrite("activation_distance", &SimulatorSettings::activation_distance)
       .def_readwrite("solver", &SimulatorSettings::solver)
       .def_readwrite("warm_start", &SimulatorSettings::warm_start)
+      .def_readwrite("implicit_pd", &SimulatorSettings::implicit_pd,
+                     "time stepping: joint PD implicit over the step (stable for any gains)")
       .add_property("tolerance", &getTol, &setTol)
       .add_property("max_iterations", &getMaxIt, &setMaxIt);
   bp::class_<SimulatorModel, std::shared_ptr<SimulatorModel>>(

@@ -201,7 +201,7 @@ void nonLinearEffectsFromKinematics(const pinocchio::Model& model, pinocchio::Da
 }  // namespace
 
 void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
-                         const Eigen::VectorXd& v, double delta, double zeta) {
+                         const Eigen::VectorXd& v, double delta, double zeta, double implicit_pd_step) {
   const pinocchio::Model& model = sim.model;
   pinocchio::Data& data = sd.data;
   const auto t0 = Clock::now();
@@ -411,12 +411,20 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
 
   // Dynamics: M (crba) and its Cholesky, nle = C v + g, tau, A = J M^-1 J^T (eq. 22).
   pinocchio::crba(model, data, q, pinocchio::Convention::LOCAL);
+  if (implicit_pd_step > 0.0) {
+    // Implicit joint PD over a step h: tau(q+, v+) ~ kp (q_t - q - h v+) + kd (v_t - v+)
+    // moves h kd + h^2 kp onto M's diagonal (stable for any gains; MuJoCo's implicitfast
+    // does the damping part). The -h kp v part of tau is added below.
+    const double h = implicit_pd_step;
+    data.M.diagonal() += h * sd.control.kd + h * h * sd.control.kp;
+  }
   // M = U D U^T by Pinocchio's tree-sparse Cholesky (cheaper than a dense LLT).
   pinocchio::cholesky::decompose(model, data);
   if (!(data.D.minCoeff() > 0.0))
     throw std::runtime_error("the mass matrix is not positive definite at this configuration");
   nonLinearEffectsFromKinematics(model, data, sd.forces, sd.nle);
   computeControl(sim, sd, q, v);
+  if (implicit_pd_step > 0.0) sd.tau -= implicit_pd_step * sd.control.kp.cwiseProduct(v);
   sd.v_free = sd.tau - sd.nle;
   pinocchio::cholesky::solve(model, data, sd.v_free);  // M^-1 (tau - nle): the free acceleration
   // A = (D^-1/2 U^-1 J^T)^T (D^-1/2 U^-1 J^T): symmetric by construction.
@@ -445,6 +453,9 @@ namespace {
 void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   const auto t0 = Clock::now();
   const Eigen::Index rows = sd.J.rows();
+  if (!sd.A.allFinite() || !sd.b.allFinite())
+    throw std::runtime_error("simulation diverged: non-finite Delassus operator or right-hand side at t = " +
+                             std::to_string(sd.t));
   // Rebuild the problem only when the active set changed.
   if (!sd.problem || sd.active != sd.problem_active) {
     std::vector<Constraint> cons;
@@ -460,8 +471,6 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     sd.b_scaled = scale * sd.b;
     sd.problem->setB(sd.b_scaled);
   }
-  if (!sd.A.allFinite() || !sd.b.allFinite())
-    throw std::runtime_error("non-finite Delassus operator or right-hand side at t = " + std::to_string(sd.t));
   // Warm start: the last lambda of each candidate that is active again.
   SolverSettings settings = sim.settings.solver_settings;
   sd.guess.resize(rows);
@@ -520,7 +529,7 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
 void acceleration(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                   const Eigen::VectorXd& v, Eigen::VectorXd& a) {
   const double delta = sim.settings.delta > 0.0 ? sim.settings.delta : sim.settings.dt;
-  buildContactProblem(sim, sd, q, v, delta, sim.settings.zeta);
+  buildContactProblem(sim, sd, q, v, delta, sim.settings.zeta, 0.0);
   solveContacts(sim, sd, 1.0);
   a = sd.v_free;  // M^-1 (tau - nle)
   if (sd.J.rows() > 0) {
@@ -578,7 +587,7 @@ void checkState(const SimulatorData& sd) {
 void stepTimeStepping(const SimulatorModel& sim, SimulatorData& sd) {
   const double h = sim.settings.dt;
   // eq. 70: delta = h, zeta = 1/2; impulses P = h lambda solve A P - h b in -N(P).
-  buildContactProblem(sim, sd, sd.q, sd.v, h, 0.5);
+  buildContactProblem(sim, sd, sd.q, sd.v, h, 0.5, sim.settings.implicit_pd ? h : 0.0);
   // The J' v term is dropped on the tangential rows (the paper allows it, §3.3):
   // a sticking contact then ends the step with exactly zero slip velocity,
   // J_t v+ = 0, instead of -h J_t' v. Normal rows keep it: it predicts the gap.

@@ -93,6 +93,7 @@ struct SimulatorSettings {
   std::string solver = "default";
   SolverSettings solver_settings;  ///< tolerance, iterations (warm start is set per step)
   bool warm_start = true;          ///< start each solve from the previous step's lambda
+  bool implicit_pd = true;         ///< time stepping: the joint PD implicit in the step (stable for any gains)
 };
 
 /// Joint-space control: tau = kp (q_target - q) + kd (v_target - v) + tau_ff on
@@ -199,8 +200,9 @@ void step(const SimulatorModel& sim, SimulatorData& sd);
 
 /// The contact problem (eq. 65) at the current state, for inspection and tests:
 /// fills sd.J, sd.A, sd.b (force level, eq. 27 with the given delta, zeta) and sd.active.
+/// implicit_pd_step = h > 0 folds the joint PD implicitly over a step h into M (time stepping).
 void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
-                         const Eigen::VectorXd& v, double delta, double zeta);
+                         const Eigen::VectorXd& v, double delta, double zeta, double implicit_pd_step = 0.0);
 
 /// tau from the joint control at (q, v).
 void computeControl(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
