@@ -325,3 +325,26 @@ def test_implicit_pd_keeps_stiff_gains_stable():
     data.q, data.kp, data.kd, data.q_target = explicit.scene.q0, explicit.scene.kp, explicit.scene.kd, explicit.scene.q0
     with pytest.raises(RuntimeError, match="diverged|non-finite"):
         _core.rollout(model, data, 500, 1)
+
+
+def test_cli_simulate_json_and_errors(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "stiction.cli", "simulate", "cube-incline-slip", "--duration", "0.5",
+                          "--json", "--save", str(tmp_path / "t.npz")], capture_output=True, text=True, check=True)
+    s = json.loads(out.stdout)
+    for key in ("scene", "steps", "us_per_step", "max_penetration", "max_residual", "base_drift",
+                "max_normal_velocity_while_sliding", "mean_acceleration_along_slope", "max_foot_slip"):
+        assert key in s
+    assert s["steps"] == 500 and s["scene"] == "cube-incline-slip"
+    assert (tmp_path / "t.npz").is_file()
+    bad = subprocess.run([sys.executable, "-m", "stiction.cli", "simulate", "no-such-scene"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "unknown scene" in bad.stderr
+    listing = subprocess.run([sys.executable, "-m", "stiction.cli", "scenes"], capture_output=True, text=True,
+                             check=True).stdout
+    for name in ("cube-slide", "cube-incline-stick", "cube-incline-slip", "two-cube-stack", "solo12-stand",
+                 "solo12-slope-stick", "solo12-slope-slip", "go2-stand", "anymal-stand", "ur5-push-wall"):
+        assert name in listing

@@ -228,9 +228,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except ValueError as exc:
+    except (ValueError, FileNotFoundError) as exc:  # bad input: the message names it
         print(f"stiction {args.command}: {exc}", file=sys.stderr)
         return 2
+    except RuntimeError as exc:  # e.g. a simulation that diverged
+        print(f"stiction {args.command}: {exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":
