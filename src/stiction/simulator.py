@@ -12,7 +12,6 @@ import pinocchio as pin
 from . import _core
 from .scene import Scene, load_scene
 
-STATE_NAMES = {0: "open", 1: "stick", 2: "slip", 3: "closed"}
 _VECTOR_KEYS = ("t", "residual", "iterations", "converged", "dt")
 
 

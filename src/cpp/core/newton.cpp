@@ -241,16 +241,21 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
       best_res = r;
     }
   };
+  // Newton from `lam` for at most `steps` (within the budget); true when it converged.
+  auto newton_from_here = [&](int steps) {
+    used += newton_.run(problem, lam, std::min(steps, std::max(0, budget - used)), tol, remaining(), newton_msg);
+    if (newton_msg == "converged") return true;
+    keep_best(lam);
+    return false;
+  };
+  auto finish = [&](const char* how) {
+    result.iterations = used;
+    result.message = how;
+  };
   if (problem.numRows() <= kNewtonFirstRows) {
     // 1a. Small problems (a robot's feet, a box's corners): a dense Newton step
     //     costs less than a few Gauss-Seidel sweeps and converges in a handful.
-    used += newton_.run(problem, lam, std::min(30, budget), tol, remaining(), newton_msg);
-    if (newton_msg == "converged") {
-      result.iterations = used;
-      result.message = "converged (newton)";
-      return;
-    }
-    keep_best(lam);
+    if (newton_from_here(30)) return finish("converged (newton)");
     // 1a'. Newton from ProxQP's facetized-cone QP solution: measured on stick-dominated,
     //      ill-conditioned problems (a 1e4 stack at rest), where Newton stalls from zero
     //      and converges in one step from the QP point; the QP costs ~0.1-0.3 ms at this
@@ -258,13 +263,7 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
     if (used < budget) {
       try {
         proxqpWarmStart(problem, settings, lam);
-        used += newton_.run(problem, lam, std::min(30, budget - used), tol, remaining(), newton_msg);
-        if (newton_msg == "converged") {
-          result.iterations = used;
-          result.message = "converged (proxqp, newton)";
-          return;
-        }
-        keep_best(lam);
+        if (newton_from_here(30)) return finish("converged (proxqp, newton)");
       } catch (const std::runtime_error&) {
         // ProxQP failed: carry on with the fallbacks below
       }
@@ -279,23 +278,11 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
       return;
     }
     keep_best(lam);
-    used += newton_.run(problem, lam, std::min(50, budget - used), tol, remaining(), newton_msg);
-    if (newton_msg == "converged") {
-      result.iterations = used;
-      result.message = "converged (nsgs, newton)";
-      return;
-    }
-    keep_best(lam);
+    if (newton_from_here(50)) return finish("converged (nsgs, newton)");
     // Newton from the initial guess: on some problems the NSGS iterate sits in
     // a region where the line search stalls and the guess does not (SpheresBox).
     lam = initial_;
-    used += newton_.run(problem, lam, std::min(50, std::max(0, budget - used)), tol, remaining(), newton_msg);
-    if (newton_msg == "converged") {
-      result.iterations = used;
-      result.message = "converged (nsgs, newton)";
-      return;
-    }
-    keep_best(lam);
+    if (newton_from_here(50)) return finish("converged (nsgs, newton)");
   }
   // 3. Alternate chunks of NSGS and of ADMM (never diverges, handles rank
   //    deficiency; its state carries over between its chunks), each followed by

@@ -26,7 +26,6 @@ class ContactProblem {
                  std::vector<Constraint> constraints, double asymmetry_tolerance = 1e-9);
 
   const DelassusOperator& delassus() const { return *delassus_; }
-  const std::shared_ptr<const DelassusOperator>& delassusPtr() const { return delassus_; }
   const Eigen::VectorXd& b() const { return b_; }
   const std::vector<Constraint>& constraints() const { return constraints_; }
   /// Row offset of block i (size numBlocks()+1; the last entry is numRows()).
