@@ -1,4 +1,10 @@
-"""Command line: ``stiction demo``, ``stiction fclib FILE...``, ``stiction solvers``."""
+"""Command line: ``stiction demo``, ``stiction simulate SCENE``, ``stiction scenes``, ``stiction fclib FILE...``,
+``stiction solvers``.
+
+Exit codes: 0 success; 1 the computation ran but did not succeed (a solve that missed its
+tolerance, a simulation that diverged), always with a one-line reason on stderr; 2 bad input
+(unknown scene or key, a malformed file, a bad option value), one line naming the fault.
+"""
 from __future__ import annotations
 
 import argparse
@@ -10,26 +16,15 @@ from pathlib import Path
 
 
 from . import fclib, solver_names, solve
+from ._optional import MissingExtraError, require
 
-# Problems the demo solves: small, varied, one per family that shows something.
-DEMO_PROBLEMS = [
-    "Toy--FrictionContact3D_RR_1c.dat",
-    "Rover--Rover1039.dat",
-    "OneObject--OneObject-i1028-138.hdf5.dat",
-    "BoxesStack--BoxesStack1-i100000-32.hdf5.dat",
-    "PerioBox--LMGC_100_PR_PerioBox-i00361-60-03000.hdf5",
-    "Confeti--Confeti-ex13-Fc3D-SBM.dat",
-]
+from .resources import DEMO_FCLIB_PROBLEMS as DEMO_PROBLEMS  # one per family that shows something
+from .resources import fclib_dir
 
 
 def bundled_fclib_dir() -> Path:
-    """benchmarks/fclib of the source tree (the package is installed editable from it)."""
-    here = Path(__file__).resolve()
-    for parent in here.parents:
-        candidate = parent / "benchmarks" / "fclib"
-        if candidate.is_dir():
-            return candidate
-    raise FileNotFoundError("benchmarks/fclib not found next to the stiction sources")
+    """The bundled FCLib problems (the demo set in a wheel; the whole set in a source checkout)."""
+    return fclib_dir()
 
 
 def _warm_start_arg(value: str | None, problem: fclib.FclibProblem):
@@ -90,28 +85,47 @@ def cmd_fclib(args) -> int:
         sys.stdout.write("\n")
     else:
         print(_table(rows))
-    return 0 if all(r["converged"] for r in rows) else 1
+    failed = [r for r in rows if not r["converged"]]
+    for r in failed:
+        print(f"stiction fclib: {r['file']}: not converged: {r['message']} (relative residual "
+              f"{r['relative_residual']:.3g})", file=sys.stderr)
+    return 0 if not failed else 1
 
 
 def cmd_demo(args) -> int:
     """The default demo: Solo-12 standing, then slipping down a slope (recordings, plots,
     summaries), then the exact solver on a few real contact problems."""
-    from .recording import record_html
-    from .plots import plot_trajectory
     from .simulator import Simulator
 
     out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
+    outputs = {}
+    for module, extra, what in (("meshcat", "record", "recording"), ("matplotlib", "plot", "plot")):
+        try:
+            require(module, extra, f"the demo's {what}s")
+            outputs[what] = True
+        except MissingExtraError as exc:
+            print(f"note: {exc}; skipping them", file=sys.stderr)
+            outputs[what] = False
     print("stiction demo: exact Coulomb contact, A λ - b ∈ -lim N_C^{U_ε}(λ) (eq. 65), solved every step\n")
-    ok = True
+    failures = []
     for scene, duration in (("solo12-stand", 2.0), ("solo12-slope-slip", 1.0)):
         sim = Simulator(scene)
         traj = sim.rollout(duration)
         summary = sim.summary(traj)
         html, png = out / f"{scene}.html", out / f"{scene}.png"
-        record_html(sim, traj, html)
-        plot_trajectory(sim, traj, png)
-        ok &= summary["all_converged"]
+        if outputs["recording"]:
+            from .recording import record_html
+
+            record_html(sim, traj, html)
+        if outputs["plot"]:
+            from .plots import plot_trajectory
+
+            plot_trajectory(sim, traj, png)
+        if not summary["all_converged"]:
+            failures.append(f"{scene}: {summary['unconverged_steps']} steps did not converge")
         print(f"== {scene}: {sim.scene.description}")
         keys = ("steps", "us_per_step", "max_penetration", "max_residual", "base_drift", "max_foot_slip",
                 "max_normal_velocity_while_sliding", "mean_acceleration_along_slope",
@@ -119,43 +133,64 @@ def cmd_demo(args) -> int:
         for k in keys:
             print(f"   {k:36s} {summary[k]:.4g}" if isinstance(summary[k], float) else f"   {k:36s} {summary[k]}")
         print("   µs per phase: " + ", ".join(f"{k} {v:.2f}" for k, v in summary["us_per_phase"].items()))
-        print(f"   recording {html}   plot {png}\n")
+        written = [str(p) for p, ok in ((html, outputs["recording"]), (png, outputs["plot"])) if ok]
+        print(f"   wrote {'   '.join(written)}\n" if written else "")
 
     root = bundled_fclib_dir()
     print(f"== The solver alone on real contact problems from Siconos and LMGC90 ({root.name}/):")
     rows = [solve_file(str(root / name), "default", 1e-10, 5000, 30.0, None) for name in DEMO_PROBLEMS]
     print(_table(rows))
-    ok &= all(r["converged"] for r in rows)
+    failures += [f"{r['file']}: {r['message']}" for r in rows if not r["converged"]]
     print("\nresidual = ‖λ - P_C(λ - (u + E s(u)))‖ / (1 + ‖b‖); relative = the same / ‖b‖ (Siconos' measure).")
-    print("More: stiction scenes | stiction simulate SCENE --json | stiction fclib benchmarks/fclib/*")
-    return 0 if ok else 1
+    print("More: stiction scenes | stiction simulate SCENE --json | stiction fclib FILE...")
+    if failures:
+        print("stiction demo: not everything converged: " + "; ".join(failures), file=sys.stderr)
+        return 1
+    return 0
 
 
 def cmd_scenes(args) -> int:
-    from .scene import SCENES_DIR, list_scenes
-    import tomllib
+    from .scene import list_scenes, scene_description
 
     for name in list_scenes():
-        with open(SCENES_DIR / f"{name}.toml", "rb") as fh:
-            desc = tomllib.load(fh).get("description", "")
-        print(f"{name:22s} {desc}")
+        print(f"{name:22s} {scene_description(name)}")
     return 0
+
+
+def _output_path(option: str, value: str, suffixes: tuple[str, ...]) -> Path:
+    """Check an output file option before any work: not a directory, its folder exists and is
+    writable, a known suffix."""
+    p = Path(value)
+    if p.is_dir() or value.endswith(os.sep):
+        raise ValueError(f"{option} {value}: is a directory; give a file name ending in {' or '.join(suffixes)}")
+    if p.suffix.lower() not in suffixes:
+        raise ValueError(f"{option} {value}: the file name must end in {' or '.join(suffixes)}")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise ValueError(f"{option} {value}: the folder {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise ValueError(f"{option} {value}: the folder {parent} is not writable")
+    return p
 
 
 def cmd_simulate(args) -> int:
     from .simulator import Simulator
 
-    overrides = {}
-    if args.dt is not None:
-        overrides["dt"] = args.dt
-    if args.mode is not None:
-        overrides["mode"] = args.mode
-    if args.delta is not None:
-        overrides["delta"] = args.delta
-    if args.zeta is not None:
-        overrides["zeta"] = args.zeta
+    # outputs and optional packages are checked before simulating
+    if args.record:
+        _output_path("--record", args.record, (".html",))
+        require("meshcat", "record", "--record (HTML recordings)")
+    if args.plot:
+        _output_path("--plot", args.plot, (".png", ".pdf", ".svg"))
+        require("matplotlib", "plot", "--plot")
+    if args.save:
+        _output_path("--save", args.save, (".npz",))
+    overrides = {k: getattr(args, k) for k in ("dt", "mode", "delta", "zeta", "mu", "duration", "solver")
+                 if getattr(args, k) is not None}
+    if args.tol is not None:
+        overrides["tolerance"] = args.tol
     sim = Simulator(args.scene, **overrides)
-    traj = sim.rollout(args.duration)
+    traj = sim.rollout()
     summary = sim.summary(traj)
     if args.save:
         traj.save(args.save)
@@ -177,7 +212,12 @@ def cmd_simulate(args) -> int:
     else:
         for key, val in summary.items():
             print(f"{key:38s} {val}")
-    return 0 if summary["all_converged"] else 1
+    if not summary["all_converged"]:
+        print(f"stiction simulate: {summary['unconverged_steps']} of {summary['steps']} steps did not solve the "
+              f"contact problem to the tolerance (first at t = {summary['first_unconverged_t']:.6g} s; largest "
+              f"residual {summary['max_residual']:.3g}); try a smaller --dt or another --solver", file=sys.stderr)
+        return 1
+    return 0
 
 
 def cmd_solvers(args) -> int:
@@ -186,16 +226,60 @@ def cmd_solvers(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (no usage block) and exit 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
+def _finite(kind: str):
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if not math.isfinite(x) or x < 0 or (kind == "positive" and x == 0):
+            raise argparse.ArgumentTypeError(f"{text!r}: must be a finite number {'> 0' if kind == 'positive' else '>= 0'}")
+        return x
+
+    return parse
+
+
+def _positive_int(text: str) -> int:
+    try:
+        x = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if x < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be >= 1")
+    return x
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    from . import __version__
+
+    try:
+        return version("stiction")
+    except PackageNotFoundError:
+        return __version__
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="stiction", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = _Parser(prog="stiction", description=__doc__.split("\n\n")[0],
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"stiction {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    positive, nonneg = _finite("positive"), _finite("nonnegative")
 
     p = sub.add_parser("fclib", help="solve FCLib / Siconos .dat problems")
     p.add_argument("files", nargs="+", metavar="FILE")
     p.add_argument("--solver", default="default", choices=solver_names())
-    p.add_argument("--tol", type=float, default=1e-10, help="tolerance on the residual (default 1e-10)")
-    p.add_argument("--max-iter", type=int, default=5000)
-    p.add_argument("--time-limit", type=float, default=60.0, help="seconds per problem (default 60)")
+    p.add_argument("--tol", type=positive, default=1e-10, help="tolerance on the residual (default 1e-10)")
+    p.add_argument("--max-iter", type=_positive_int, default=5000)
+    p.add_argument("--time-limit", type=positive, default=60.0, help="seconds per problem (default 60)")
     p.add_argument("--warm-start", choices=["none", "proxqp", "file"], default="none",
                    help="file: the /guesses/1 of the file when it has one")
     p.add_argument("--json", action="store_true", help="print a JSON list instead of a table")
@@ -207,12 +291,15 @@ def main(argv: list[str] | None = None) -> int:
 
     p = sub.add_parser("simulate", help="simulate a scene (see `stiction scenes`)")
     p.add_argument("scene", help="a scene name or a TOML file")
-    p.add_argument("--duration", type=float, help="seconds (default: the scene's)")
-    p.add_argument("--dt", type=float, help="time step (default: the scene's)")
+    p.add_argument("--duration", type=positive, help="seconds (default: the scene's)")
+    p.add_argument("--dt", type=positive, help="time step (default: the scene's)")
     p.add_argument("--mode", choices=["timestep", "ode", "rk4", "adaptive"],
                    help="time stepping (eq. 70) or the relaxed DAI as an ODE (eq. 39 + 64): rk4 (= ode) or adaptive")
-    p.add_argument("--delta", type=float, help="ODE modes: Baumgarte delta (default dt)")
-    p.add_argument("--zeta", type=float, help="ODE modes: Baumgarte zeta (default 0.5)")
+    p.add_argument("--delta", type=nonneg, help="ODE modes: Baumgarte delta (default dt)")
+    p.add_argument("--zeta", type=positive, help="ODE modes: Baumgarte zeta (default 0.5)")
+    p.add_argument("--mu", type=nonneg, help="friction coefficient of every contact (default: the scene's)")
+    p.add_argument("--solver", choices=solver_names(), help="contact solver (default: default)")
+    p.add_argument("--tol", type=positive, help="contact solver tolerance (default 1e-10)")
     p.add_argument("--record", metavar="FILE.html", help="write a self-contained meshcat recording")
     p.add_argument("--plot", metavar="FILE.png", help="plot base position, foot slip, contact forces")
     p.add_argument("--save", metavar="FILE.npz", help="save the trajectory")
@@ -228,12 +315,26 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError) as exc:  # bad input: the message names it
-        print(f"stiction {args.command}: {exc}", file=sys.stderr)
+    except (ValueError, TypeError, FileNotFoundError, IsADirectoryError, PermissionError, MissingExtraError) as exc:
+        # bad input: the message names it
+        print(f"stiction {args.command}: {_one_line(exc)}", file=sys.stderr)
         return 2
     except RuntimeError as exc:  # e.g. a simulation that diverged
-        print(f"stiction {args.command}: {exc}", file=sys.stderr)
+        print(f"stiction {args.command}: {_one_line(exc)}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print(f"stiction {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # a bug of ours: one line, the traceback on request
+        if os.environ.get("STICTION_TRACEBACK"):
+            raise
+        print(f"stiction {args.command}: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              "(set STICTION_TRACEBACK=1 for the traceback and please report it)", file=sys.stderr)
+        return 1
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":

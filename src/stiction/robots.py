@@ -70,6 +70,12 @@ class LoadedRobot:
     urdf_path: Path
 
 
+def robot_package_dirs() -> list[str]:
+    """Mesh search paths for example-robot-data's URDFs (package://example-robot-data/robots/...)."""
+    root = robots_dir()
+    return [str(root.parent.parent), str(root)]
+
+
 def load_urdf(path: str | os.PathLike, free_flyer: bool, package_dirs: list[str] | None = None,
               srdf: str | os.PathLike | None = None, reference: str | None = None, name: str | None = None,
               spec: RobotSpec | None = None) -> LoadedRobot:
@@ -98,6 +104,5 @@ def load_robot(name: str) -> LoadedRobot:
         raise ValueError(f"unknown robot {name!r}; known: {', '.join(sorted(ROBOTS))} (or give a URDF path)")
     spec = ROBOTS[name]
     root = robots_dir()
-    share = root.parent.parent  # meshes are package://example-robot-data/robots/...
     srdf = root / spec.srdf if spec.srdf else None
-    return load_urdf(root / spec.urdf, spec.free_flyer, [str(share), str(root)], srdf, spec.reference, name, spec)
+    return load_urdf(root / spec.urdf, spec.free_flyer, robot_package_dirs(), srdf, spec.reference, name, spec)

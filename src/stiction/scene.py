@@ -30,7 +30,9 @@ Keys (all optional unless stated):
 """
 from __future__ import annotations
 
+import difflib
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,11 +41,21 @@ import numpy as np
 import pinocchio as pin
 
 from . import _core
-from .robots import load_robot, load_urdf
+from .resources import robots_dir as bundled_robots_dir
+from .resources import scenes_dir
+from .robots import load_robot, load_urdf, robot_package_dirs
+from .scene_schema import SceneError, validate_scene
 
-SCENES_DIR = Path(__file__).resolve().parents[2] / "robots" / "scenes"
-ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
 GRAVITY = 9.81
+
+
+def __getattr__(name: str):
+    # SCENES_DIR and ROBOTS_DIR: resolved on use (package data of a wheel, or the source checkout)
+    if name == "SCENES_DIR":
+        return scenes_dir()
+    if name == "ROBOTS_DIR":
+        return bundled_robots_dir()
+    raise AttributeError(f"module 'stiction.scene' has no attribute {name!r}")
 
 
 @dataclass
@@ -79,35 +91,40 @@ class Scene:
     def slope(self) -> float:
         return math.radians(self.slope_deg)
 
-    def settings(self, **overrides) -> _core.SimulatorSettings:
-        s = _core.SimulatorSettings()
-        s.dt = overrides.get("dt", self.dt)
-        mode = overrides.get("mode", self.mode)
-        modes = {"timestep": _core.IntegrationMode.timestep, "rk4": _core.IntegrationMode.rk4,
-                 "adaptive": _core.IntegrationMode.adaptive, "ode": _core.IntegrationMode.rk4}
-        if mode not in modes:
-            raise ValueError(f"unknown integration mode {mode!r} (timestep, rk4, adaptive, ode)")
-        s.mode = modes[mode]
-        s.delta = overrides.get("delta", self.delta)
-        s.zeta = overrides.get("zeta", self.zeta)
-        s.tolerance = overrides.get("tolerance", 1e-10)
-        s.max_iterations = overrides.get("max_iterations", 200)
-        s.solver = overrides.get("solver", "default")
-        if "ode_tolerance" in overrides:
-            s.ode_tolerance = overrides["ode_tolerance"]
-        return s
-
 
 def list_scenes() -> list[str]:
-    return sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
+    """Names of the bundled scenes."""
+    return sorted(p.stem for p in scenes_dir().glob("*.toml"))
 
 
-def _resolve(path: str) -> Path:
+def scene_description(name: str) -> str:
+    """The `description` of a bundled scene (read without building it)."""
+    with open(scenes_dir() / f"{name}.toml", "rb") as fh:
+        return str(tomllib.load(fh).get("description", ""))
+
+
+def _resolve(path: str, base_dir=None) -> Path:
+    """A URDF path: absolute, relative to the scene file's folder, or a bundled URDF."""
     p = Path(path)
-    for candidate in (p, ROBOTS_DIR / p):
+    candidates = [p] if p.is_absolute() else ([Path(base_dir) / p] if base_dir is not None else []) + \
+        [bundled_robots_dir() / p, p]
+    for candidate in candidates:
         if candidate.is_file():
             return candidate
-    raise FileNotFoundError(f"{path}: not found (relative paths are looked up in {ROBOTS_DIR})")
+    raise FileNotFoundError(f"URDF {path!r} not found (looked in: {', '.join(str(c.parent) for c in candidates)})")
+
+
+def _package_dirs(urdf: Path) -> list[str]:
+    """Where `package://NAME/...` meshes of a user's URDF are searched: the folders above the URDF
+    (a ROS package layout NAME/urdf/robot.urdf), the bundled robots and example-robot-data."""
+    urdf = Path(urdf).resolve()
+    dirs = [str(p) for p in list(urdf.parents)[:3]]
+    dirs.append(str(bundled_robots_dir()))
+    try:
+        dirs += robot_package_dirs()
+    except FileNotFoundError:
+        pass
+    return dirs
 
 
 def _box_half_extents(visual_model: pin.GeometryModel) -> np.ndarray | None:
@@ -141,96 +158,146 @@ def _corners(half: np.ndarray, z_sign: float | None = None):
     return out
 
 
-def load_scene(name_or_path: str) -> Scene:
-    """A scene by name (a file of robots/scenes/) or by path to a TOML file."""
+def load_scene(name_or_path: str | os.PathLike) -> Scene:
+    """A scene by name (a bundled file, see :func:`list_scenes`) or by path to a TOML file.
+
+    The file is checked against :mod:`stiction.scene_schema` first: unknown keys, wrong types,
+    shapes and ranges raise :class:`~stiction.scene_schema.SceneError` (a ValueError) naming
+    the field. Relative URDF paths are looked up next to the scene file, then in the bundled
+    robots directory."""
+    if not isinstance(name_or_path, (str, os.PathLike)):
+        raise TypeError(f"scene must be a name, a path or a Scene, got {type(name_or_path).__name__}")
     p = Path(name_or_path)
-    if not p.suffix:
-        p = SCENES_DIR / f"{name_or_path}.toml"
+    if not p.suffix and not p.exists():
+        p = scenes_dir() / f"{name_or_path}.toml"
+        if not p.is_file():
+            close = difflib.get_close_matches(str(name_or_path), list_scenes(), n=1, cutoff=0.6)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise SceneError(f"unknown scene {str(name_or_path)!r} ({hint}known: {', '.join(list_scenes())}; "
+                             "or give the path of a .toml file)")
     if not p.is_file():
-        raise ValueError(f"unknown scene {name_or_path!r}; known: {', '.join(list_scenes())}")
-    with open(p, "rb") as fh:
-        cfg = tomllib.load(fh)
-    return build_scene(cfg, default_name=p.stem)
+        raise FileNotFoundError(f"scene file not found: {p}")
+    try:
+        with open(p, "rb") as fh:
+            cfg = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{p}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise SceneError(f"{p}: not a text (UTF-8) TOML file") from None
+    return build_scene(cfg, default_name=p.stem, source=str(p), base_dir=p.parent)
 
 
-def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
-    ground = cfg.get("ground", {})
-    slope_deg = float(ground.get("slope_deg", 0.0))
-    mu = float(ground.get("mu", 0.5))
-    if mu < 0:
-        raise ValueError(f"ground mu must be >= 0, got {mu}")
-    contacts_cfg = cfg.get("contacts", {})
-    control = cfg.get("control", {})
-    initial = cfg.get("initial", {})
+def _quaternion_check(model: pin.Model, q: np.ndarray, field: str) -> np.ndarray:
+    """Normalise the quaternions of free-flyer and spherical joints in q; a zero (or far from
+    unit) quaternion is an error naming the joint."""
+    q = q.copy()
+    for j in range(1, model.njoints):
+        kind = model.joints[j].shortname()
+        start = {"JointModelFreeFlyer": 3, "JointModelSpherical": 0}.get(kind)
+        if start is None:
+            continue
+        i = model.joints[j].idx_q + start
+        norm = float(np.linalg.norm(q[i:i + 4]))
+        if not 0.9 < norm < 1.1:
+            raise SceneError(f"{field}: the quaternion of joint {model.names[j]!r} (entries {i}..{i + 3}) has "
+                             f"norm {norm:g}; give a unit quaternion (x, y, z, w)")
+        q[i:i + 4] /= norm
+    return q
+
+
+def build_scene(cfg: dict, default_name: str = "scene", source: str | None = None,
+                base_dir: str | os.PathLike | None = None) -> Scene:
+    """A Scene from a scene dict (the keys of a scene TOML file, see :mod:`stiction.scene_schema`).
+    The dict is validated first; nothing is built from an invalid one."""
+    source = source or f"scene {cfg.get('name', default_name)!r}" if isinstance(cfg, dict) else "scene"
+    cfg = validate_scene(cfg, source)
+    try:
+        return _build_scene(cfg, default_name, base_dir)
+    except SceneError as exc:
+        raise SceneError(f"{source}: {exc}") from None
+
+
+def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
+    ground, contacts_cfg, control, initial = cfg["ground"], cfg["contacts"], cfg["control"], cfg["initial"]
+    slope_deg, mu = ground["slope_deg"], ground["mu"]
 
     halfspaces = [_halfspace("ground", (0, 0, 1), 0.0)]
     contacts: list = []
-    if "robot" in cfg or "urdf" in cfg:
-        robot = (load_robot(cfg["robot"]) if "robot" in cfg
-                 else load_urdf(_resolve(cfg["urdf"]), bool(cfg.get("free_flyer", True))))
+    urdf_path = None
+    if cfg["robot"] is not None or cfg["urdf"] is not None:
+        if cfg["robot"] is not None:
+            from .robots import ROBOTS
+
+            if cfg["robot"] not in ROBOTS:
+                close = difflib.get_close_matches(cfg["robot"], list(ROBOTS), n=1, cutoff=0.5)
+                hint = f"did you mean {close[0]!r}? " if close else ""
+                raise SceneError(f"robot = {cfg['robot']!r}: unknown robot ({hint}known: {', '.join(sorted(ROBOTS))}; "
+                                 "or give `urdf`)")
+            robot = load_robot(cfg["robot"])
+        else:
+            urdf_path = _resolve(cfg["urdf"], base_dir)
+            robot = load_urdf(urdf_path, cfg["free_flyer"], _package_dirs(urdf_path))
         model, visual, q0 = robot.model, robot.visual_model, robot.q0.copy()
         spec = robot.spec
-        if "q" in initial:
+        if initial["q"] is not None:
             q0 = np.asarray(initial["q"], dtype=float)
             if q0.shape != (model.nq,):
-                raise ValueError(f"initial.q needs nq = {model.nq} entries, got {q0.shape[0]}")
-        if control.get("lock_joints", False) and model.njoints > 2:
+                raise SceneError(f"initial.q needs nq = {model.nq} entries, got {q0.shape[0]}")
+            q0 = _quaternion_check(model, q0, "initial.q")
+        if control["lock_joints"] and model.njoints > 2:
             # A rigid robot: every joint but the free flyer held at its initial value.
             lock = list(range(2, model.njoints))
             model, visual = pin.buildReducedModel(model, visual, lock, q0)
             q0 = q0[:7].copy()
-        if contacts_cfg.get("feet", spec is not None and bool(spec.feet)):
+        feet = contacts_cfg["feet"] if contacts_cfg["feet"] is not None else (spec is not None and bool(spec.feet))
+        if feet:
             if spec is None or not spec.feet:
-                raise ValueError("contacts.feet: this robot has no foot frames; list them with contacts.frames")
-            radius = float(contacts_cfg.get("radius", spec.foot_radius))
+                raise SceneError("contacts.feet = true: this robot has no foot frames; list them with contacts.frames")
+            radius = contacts_cfg["radius"] if contacts_cfg["radius"] is not None else spec.foot_radius
             for f in spec.feet:
                 contacts.append(_sphere(f, model.getFrameId(f), (0, 0, 0), radius, 0, mu))
-        for frame_name in contacts_cfg.get("frames", []):
-            if not model.existFrame(frame_name):
-                raise ValueError(f"contacts.frames: no frame {frame_name!r} in the model")
-            contacts.append(_sphere(frame_name, model.getFrameId(frame_name), (0, 0, 0),
-                                    float(contacts_cfg.get("radius", 0.0)), 0, mu))
-        if spec is not None and spec.points and contacts_cfg.get("soles", True):
+        for frame_name in contacts_cfg["frames"]:
+            contacts.append(_sphere(frame_name, _frame_id(model, frame_name, "contacts.frames"), (0, 0, 0),
+                                    contacts_cfg["radius"] or 0.0, 0, mu))
+        if spec is not None and spec.points and contacts_cfg["soles"]:
             for frame_name, offset in spec.points:
                 contacts.append(_sphere(f"{frame_name}{offset}", model.getFrameId(frame_name), offset, 0.0, 0, mu))
-        if contacts_cfg.get("box_corners", False):
+        if contacts_cfg["box_corners"]:
             half = _box_half_extents(visual)
             if half is None:
-                raise ValueError("contacts.box_corners: the URDF has no box visual")
+                raise SceneError("contacts.box_corners = true: the URDF has no box visual")
             body_frame = next(i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY)
             for k, corner in enumerate(_corners(half)):
                 contacts.append(_sphere(f"corner{k}", body_frame, corner, 0.0, 0, mu))
-    elif "bodies" in cfg:
-        model, visual, q0, contacts, halfspaces = _stacked_bodies(cfg["bodies"], mu, halfspaces)
     else:
-        raise ValueError("a scene needs `robot`, `urdf` or `bodies`")
+        for key in ("feet", "radius"):
+            if contacts_cfg[key] is not None:
+                raise SceneError(f"contacts.{key}: `bodies` scenes use their box corners")
+        model, visual, q0, contacts, halfspaces = _stacked_bodies(cfg["bodies"], mu, halfspaces, base_dir)
 
-    for wall in cfg.get("walls", []):
-        halfspaces.append(_halfspace(wall.get("name", f"wall{len(halfspaces)}"), wall["normal"], wall["offset"]))
-        for frame_name in wall.get("frames", []):
-            if not model.existFrame(frame_name):
-                raise ValueError(f"walls.frames: no frame {frame_name!r} in the model")
-            contacts.append(_sphere(f"{frame_name}-{wall.get('name', 'wall')}", model.getFrameId(frame_name),
-                                    wall.get("offset_in_frame", (0, 0, 0)), float(wall.get("radius", 0.0)),
-                                    len(halfspaces) - 1, float(wall.get("mu", mu))))
+    for w, wall in enumerate(cfg["walls"]):
+        name = wall["name"] or f"wall{len(halfspaces)}"
+        halfspaces.append(_halfspace(name, wall["normal"], wall["offset"]))
+        for frame_name in wall["frames"]:
+            fid = _frame_id(model, frame_name, f"walls[{w}].frames")
+            contacts.append(_sphere(f"{frame_name}-{name}", fid, wall["offset_in_frame"], wall["radius"],
+                                    len(halfspaces) - 1, mu if wall["mu"] is None else wall["mu"]))
 
     geometry, pairs = None, []
-    if "collision" in cfg:
-        geometry, pairs = _collision_pairs(cfg, model, mu)
+    if cfg["collision"]["pairs"] is not None:
+        geometry, pairs = _collision_pairs(cfg, model, mu, urdf_path)
+    elif cfg["collision"]["boxes"] or cfg["collision"]["mu"] is not None:
+        raise SceneError("collision: boxes or mu without pairs do nothing; list the pairs")
 
     anchors = []
-    for k, a in enumerate(cfg.get("anchors", [])):
-        if not model.existFrame(a["frame"]):
-            raise ValueError(f"anchors[{k}]: no frame {a['frame']!r} in the model")
+    for k, a in enumerate(cfg["anchors"]):
         pa = _core.PointAnchor()
-        pa.name, pa.frame = a.get("name", f"anchor{k}"), model.getFrameId(a["frame"])
-        pa.offset = np.asarray(a.get("offset", (0.0, 0.0, 0.0)), dtype=float)
-        if "frame2" in a:  # a closed loop: held to a point of another body
-            if not model.existFrame(a["frame2"]):
-                raise ValueError(f"anchors[{k}]: no frame {a['frame2']!r} in the model")
-            pa.frame2 = model.getFrameId(a["frame2"])
-            pa.offset2 = np.asarray(a.get("offset2", (0.0, 0.0, 0.0)), dtype=float)
-        elif "target" in a:
+        pa.name, pa.frame = a["name"] or f"anchor{k}", _frame_id(model, a["frame"], f"anchors[{k}].frame")
+        pa.offset = np.asarray(a["offset"], dtype=float)
+        if a["frame2"] is not None:  # a closed loop: held to a point of another body
+            pa.frame2 = _frame_id(model, a["frame2"], f"anchors[{k}].frame2")
+            pa.offset2 = np.asarray(a["offset2"], dtype=float)
+        elif a["target"] is not None:
             pa.target = np.asarray(a["target"], dtype=float)
         else:
             data = model.createData()
@@ -243,10 +310,16 @@ def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
     model.gravity = pin.Motion(np.array([GRAVITY * math.sin(th), 0.0, -GRAVITY * math.cos(th)]), np.zeros(3))
 
     free = model.joints[1].shortname() == "JointModelFreeFlyer" if model.njoints > 1 else False
+    bodies = cfg["bodies"] is not None
+    for key in ("base_velocity", "base_xy"):
+        if initial[key] is not None and not free:
+            raise SceneError(f"initial.{key}: the model has no free-flyer base")
+    if initial["top_velocity"] is not None and not bodies:
+        raise SceneError("initial.top_velocity applies to `bodies` scenes only")
     v0 = np.zeros(model.nv)
-    if free and "bodies" not in cfg and not anchors:
-        if "base_xy" in initial or "q" not in initial:
-            q0[:2] = initial.get("base_xy", [0.0, 0.0])
+    if free and not bodies and not anchors:
+        if initial["base_xy"] is not None or initial["q"] is None:
+            q0[:2] = initial["base_xy"] if initial["base_xy"] is not None else [0.0, 0.0]
         # lower (or raise) the base so the lowest contact touches z = 0, plus `drop`
         data = model.createData()
         pin.framesForwardKinematics(model, data, q0)
@@ -259,69 +332,88 @@ def build_scene(cfg: dict, default_name: str = "scene") -> Scene:
                 cp = geometry.collisionPairs[gp.pair]
                 if "ground" in (geometry.geometryObjects[cp.first].name, geometry.geometryObjects[cp.second].name):
                     lowest = min(lowest, pin.computeDistance(geometry, gdata, gp.pair).min_distance)
-        if math.isfinite(lowest) and "q" not in initial:
-            q0[2] += -lowest + float(initial.get("drop", 0.0))
-        v0[:6] = initial.get("base_velocity", [0.0] * 6)
-    elif "bodies" in cfg and "top_velocity" in initial:
-        v0[6:12] = initial["top_velocity"]
-    if "base_velocity" in initial and "bodies" in cfg:
+        if math.isfinite(lowest) and initial["q"] is None:
+            q0[2] += -lowest + initial["drop"]
+        if initial["base_velocity"] is not None:
+            v0[:6] = initial["base_velocity"]
+    elif bodies:
+        if initial["top_velocity"] is not None:
+            v0[-6:] = initial["top_velocity"]
+        if initial["base_velocity"] is not None:
+            v0[:6] = initial["base_velocity"]
+    elif initial["base_velocity"] is not None:
         v0[:6] = initial["base_velocity"]
 
     kp = np.zeros(model.nv)
     kd = np.zeros(model.nv)
     start = 6 if free else 0
-    kp[start:] = float(control.get("kp", 0.0))
-    kd[start:] = float(control.get("kd", 0.0))
+    kp[start:] = control["kp"]
+    kd[start:] = control["kd"]
     q_target = q0.copy()
-    if "q_target" in control:
+    if control["q_target"] is not None:
         joints = np.asarray(control["q_target"], dtype=float)
         if joints.shape != (model.nq - (7 if free else 0),):
-            raise ValueError(f"control.q_target needs the {model.nq - (7 if free else 0)} joint positions")
+            raise SceneError(f"control.q_target needs the {model.nq - (7 if free else 0)} joint positions, "
+                             f"got {joints.shape[0]}")
         q_target[(7 if free else 0):] = joints
     tau_ff = np.zeros(model.nv)
-    if control.get("gravity_feedforward", False):
+    if control["gravity_feedforward"]:
         tau_ff = pin.computeGeneralizedGravity(model, model.createData(), q_target).copy()
         tau_ff[:start] = 0.0
 
-    dt = float(cfg.get("dt", 1e-3))
     return Scene(
-        name=cfg.get("name", default_name), description=cfg.get("description", ""), model=model,
+        name=cfg["name"] or default_name, description=cfg["description"], model=model,
         visual_model=visual, halfspaces=halfspaces, contacts=contacts, anchors=anchors, q0=q0, v0=v0, kp=kp, kd=kd,
         q_target=q_target, tau_ff=tau_ff, geometry=geometry, pairs=pairs,
-        duration=float(cfg.get("duration", 2.0)), dt=dt, settle_time=float(cfg.get("settle_time", 0.0)),
-        mode=cfg.get("mode", "timestep"), delta=float(cfg.get("delta", 0.0)), zeta=float(cfg.get("zeta", 0.5)),
+        duration=cfg["duration"], dt=cfg["dt"], settle_time=cfg["settle_time"],
+        mode=cfg["mode"], delta=cfg["delta"], zeta=cfg["zeta"],
         slope_deg=slope_deg, mu=mu, config=cfg)
 
 
-def _collision_pairs(cfg: dict, model: pin.Model, mu: float):
+def _frame_id(model: pin.Model, name: str, field: str) -> int:
+    if not model.existFrame(name):
+        close = difflib.get_close_matches(name, [f.name for f in model.frames], n=1, cutoff=0.5)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise SceneError(f"{field}: no frame {name!r} in the model{hint}")
+    return model.getFrameId(name)
+
+
+def _collision_pairs(cfg: dict, model: pin.Model, mu: float, urdf_path: Path | None):
     """The coal geometry model and pairs of the [collision] table."""
     import coal
 
     col = cfg["collision"]
-    if "urdf" in cfg:
-        urdf = _resolve(cfg["urdf"])
-    elif "robot" in cfg:
+    if cfg["robot"] is not None:
         from .robots import ROBOTS, robots_dir
 
-        urdf = robots_dir() / ROBOTS[cfg["robot"]].urdf
+        urdf, package_dirs = robots_dir() / ROBOTS[cfg["robot"]].urdf, robot_package_dirs()
+    elif urdf_path is not None:
+        urdf, package_dirs = urdf_path, _package_dirs(urdf_path)
     else:
-        raise ValueError("collision: needs a `robot` or `urdf` scene")
-    geometry = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION)
+        raise SceneError("collision: needs a `robot` or `urdf` scene")
+    # the mesh search paths matter: a bundled robot's collision meshes are package:// URIs
+    geometry = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION, package_dirs=package_dirs)
     geometry.addGeometryObject(pin.GeometryObject("ground", 0, pin.SE3.Identity(),
                                                   coal.Halfspace(np.array([0.0, 0.0, 1.0]), 0.0)))
-    for box in col.get("boxes", []):
+    for k, box in enumerate(col["boxes"]):
+        if box["name"] in [g.name for g in geometry.geometryObjects]:
+            raise SceneError(f"collision.boxes[{k}].name: {box['name']!r} is already a geometry name")
         place = pin.SE3(np.eye(3), np.asarray(box["position"], dtype=float))
-        geometry.addGeometryObject(pin.GeometryObject(box["name"], 0, place, coal.Box(*map(float, box["size"]))))
+        geometry.addGeometryObject(pin.GeometryObject(box["name"], 0, place, coal.Box(*box["size"])))
     names = [g.name for g in geometry.geometryObjects]
     pairs = []
-    for a, b in col.get("pairs", []):
+    for k, (a, b) in enumerate(col["pairs"]):
         for n in (a, b):
             if n not in names:
-                raise ValueError(f"collision.pairs: no geometry {n!r} (known: {', '.join(names)})")
+                close = difflib.get_close_matches(n, names, n=1, cutoff=0.5)
+                hint = f"did you mean {close[0]!r}? " if close else ""
+                raise SceneError(f"collision.pairs[{k}]: no geometry {n!r} ({hint}known: {', '.join(names)})")
+        if a == b:
+            raise SceneError(f"collision.pairs[{k}]: a geometry cannot collide with itself ({a!r})")
         geometry.addCollisionPair(pin.CollisionPair(names.index(a), names.index(b)))
         gp = _core.GeometryPairContact()
         gp.name, gp.pair = f"{a}|{b}", len(geometry.collisionPairs) - 1
-        gp.mu, gp.max_contacts = float(col.get("mu", mu)), int(col.get("max_contacts", 4))
+        gp.mu, gp.max_contacts = mu if col["mu"] is None else col["mu"], col["max_contacts"]
         pairs.append(gp)
     return geometry, pairs
 
@@ -387,7 +479,7 @@ def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = 
                  slope_deg=slope_deg, mu=mu, geometry=geometry, pairs=pair_list)
 
 
-def _stacked_bodies(paths: list[str], mu: float, halfspaces: list):
+def _stacked_bodies(paths: list[str], mu: float, halfspaces: list, base_dir=None):
     """Free-flying URDF boxes stacked on the ground in the listed order: each box's
     bottom corners touch the ground (the first) or the top face of the box below."""
     model = pin.Model()
@@ -398,10 +490,11 @@ def _stacked_bodies(paths: list[str], mu: float, halfspaces: list):
     below_frame = None
     below_half = None
     for k, path in enumerate(paths):
-        body = load_urdf(_resolve(path), True, name=f"body{k}")
+        urdf = _resolve(path, base_dir)
+        body = load_urdf(urdf, True, _package_dirs(urdf), name=f"body{k}")
         half = _box_half_extents(body.visual_model)
         if half is None:
-            raise ValueError(f"{path}: stacked bodies must be boxes")
+            raise SceneError(f"bodies[{k}] = {path!r}: stacked bodies must be boxes (a URDF with a box visual)")
         # prefix names so several copies can coexist
         for f in body.model.frames:
             f.name = f"{f.name}_{k}" if f.name != "universe" else f.name

@@ -1,7 +1,10 @@
 """Python front of the C++ simulator: scenes in, trajectories and summaries out."""
 from __future__ import annotations
 
+import dataclasses
+import difflib
 import math
+import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable
@@ -64,21 +67,118 @@ class Trajectory:
         return cls(**kw)
 
 
-class Simulator:
-    """A scene (name, TOML path or Scene) with its C++ model and data.
+# Every override Simulator(scene, **overrides) accepts, and what it sets.
+OVERRIDES = {
+    "dt": "time step in s (time stepping and rk4; the adaptive mode's first step)",
+    "duration": "default rollout duration in s",
+    "mode": "timestep | rk4 | ode (= rk4) | adaptive",
+    "delta": "ODE modes: Baumgarte delta in s (eq. 64; 0 = dt)",
+    "zeta": "ODE modes: Baumgarte zeta (eq. 64)",
+    "mu": "friction coefficient of every contact (ground, walls, coal pairs)",
+    "tolerance": "contact solver tolerance on the relative residual",
+    "max_iterations": "contact solver iteration budget per solve",
+    "solver": "contact solver name (stiction.solver_names())",
+    "ode_tolerance": "adaptive mode: local error tolerance",
+}
+_MODES = {"timestep": 0, "rk4": 1, "ode": 1, "adaptive": 2}
 
-    Settings overrides: dt, mode ("timestep", "rk4"/"ode", "adaptive"), delta, zeta,
-    tolerance, max_iterations, solver, ode_tolerance.
+
+def _positive(name: str, value, allow_zero: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise TypeError(f"{name} must be a number, got {type(value).__name__} {value!r}")
+    x = float(value)
+    if not math.isfinite(x) or x < 0 or (x == 0 and not allow_zero):
+        raise ValueError(f"{name} must be a finite number {'>=' if allow_zero else '>'} 0, got {value!r}")
+    return x
+
+
+class _ReadOnly:
+    """A read-only view of the C++ settings: they are fixed when the Simulator is built (the
+    model is immutable), so assigning to them is an error instead of a silent no-op."""
+
+    def __init__(self, settings):
+        object.__setattr__(self, "_settings", settings)
+
+    def __getattr__(self, name):
+        return getattr(self._settings, name)
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"Simulator settings are read-only (cannot set {name!r}); "
+                             f"build a new Simulator(scene, {name}=...) instead")
+
+    def __repr__(self) -> str:
+        keys = ("dt", "mode", "delta", "zeta", "tolerance", "max_iterations", "solver", "ode_tolerance")
+        return "SimulatorSettings(" + ", ".join(f"{k}={getattr(self._settings, k)!r}" for k in keys) + ")"
+
+
+class Simulator:
+    """A scene (name, TOML path or Scene) with its C++ model (immutable) and data (state).
+
+    Overrides (keyword arguments; anything else is an error): see ``OVERRIDES`` —
+    dt, duration, mode, delta, zeta, mu, tolerance, max_iterations, solver, ode_tolerance.
+
+    State: ``sim.data.q``, ``.v``, ``.t`` and the control vectors (``kp``, ``kd``, ``q_target``,
+    ``v_target``, ``tau_ff``) read as *copies* (numpy arrays detached from the simulator: changing
+    an entry of one changes nothing); assigning a whole array sets it (size and finiteness are
+    checked). The supported way to set the state is :meth:`set_state`, which also normalises
+    quaternions; :meth:`reset` returns to the scene's initial state.
     """
 
-    def __init__(self, scene: Scene | str, **overrides):
-        self.scene = load_scene(scene) if isinstance(scene, str) else scene
-        self.settings = self.scene.settings(**overrides)
-        sc = self.scene
-        self.model = _core.SimulatorModel(sc.model, sc.halfspaces, sc.contacts, sc.anchors, self.settings,
+    def __init__(self, scene: Scene | str | os.PathLike, **overrides):
+        for key in overrides:
+            if key not in OVERRIDES:
+                close = difflib.get_close_matches(key, list(OVERRIDES), n=1, cutoff=0.5)
+                hint = f"did you mean {close[0]!r}? " if close else ""
+                raise TypeError(f"Simulator: unknown override {key!r} ({hint}valid: {', '.join(OVERRIDES)})")
+        if isinstance(scene, Scene):
+            sc = scene
+        elif isinstance(scene, (str, os.PathLike)):
+            sc = load_scene(scene)
+        else:
+            raise TypeError(f"Simulator: scene must be a Scene, a scene name or a TOML path, "
+                            f"got {type(scene).__name__}")
+        if "mu" in overrides:
+            sc = _with_friction(sc, _positive("mu", overrides["mu"], allow_zero=True))
+        self.scene = sc
+        self.duration = _positive("duration", overrides.get("duration", sc.duration))
+        settings = self._settings_from(sc, overrides)
+        self.model = _core.SimulatorModel(sc.model, sc.halfspaces, sc.contacts, sc.anchors, settings,
                                           sc.geometry, sc.pairs)
         self.data = _core.SimulatorData(self.model)
         self.reset()
+
+    @staticmethod
+    def _settings_from(sc: Scene, overrides: dict) -> "_core.SimulatorSettings":
+        s = _core.SimulatorSettings()
+        s.dt = _positive("dt", overrides.get("dt", sc.dt))
+        mode = overrides.get("mode", sc.mode)
+        if mode not in _MODES:
+            raise ValueError(f"mode must be one of {', '.join(_MODES)}, got {mode!r}")
+        s.mode = _core.IntegrationMode.values[_MODES[mode]]
+        s.delta = _positive("delta", overrides.get("delta", sc.delta), allow_zero=True)
+        s.zeta = _positive("zeta", overrides.get("zeta", sc.zeta))
+        s.tolerance = _positive("tolerance", overrides.get("tolerance", 1e-10))
+        max_it = overrides.get("max_iterations", 200)
+        if isinstance(max_it, bool) or not isinstance(max_it, (int, np.integer)) or max_it < 1:
+            raise ValueError(f"max_iterations must be an integer >= 1, got {max_it!r}")
+        s.max_iterations = int(max_it)
+        solver = overrides.get("solver", "default")
+        if solver not in _core.solver_names():
+            raise ValueError(f"solver must be one of {', '.join(_core.solver_names())}, got {solver!r}")
+        s.solver = solver
+        if "ode_tolerance" in overrides:
+            s.ode_tolerance = _positive("ode_tolerance", overrides["ode_tolerance"])
+        return s
+
+    @property
+    def settings(self) -> _ReadOnly:
+        """The settings the C++ model was built with (read-only)."""
+        return _ReadOnly(self.model.settings)
+
+    @property
+    def dt(self) -> float:
+        """The time step (read-only: build a new Simulator(scene, dt=...) to change it)."""
+        return float(self.model.settings.dt)
 
     @property
     def contact_names(self) -> list[str]:
@@ -89,24 +189,44 @@ class Simulator:
         return names
 
     def reset(self) -> None:
+        """Back to the scene's initial state, time 0 and control."""
         sc, d = self.scene, self.data
         d.q, d.v, d.t = sc.q0, sc.v0, 0.0
         d.kp, d.kd, d.q_target, d.tau_ff = sc.kp, sc.kd, sc.q_target, sc.tau_ff
+
+    def set_state(self, q=None, v=None, t: float | None = None) -> None:
+        """Set the configuration q (nq), velocity v (nv) and/or time t. Arrays are checked for
+        size and finiteness; quaternions (free-flyer and spherical joints) are normalised and a
+        zero quaternion is an error."""
+        model = self.scene.model
+        if q is not None:
+            qa = _vector("q", q, model.nq)
+            self.data.q = _normalized_configuration(model, qa)
+        if v is not None:
+            self.data.v = _vector("v", v, model.nv)
+        if t is not None:
+            self.data.t = _positive("t", t, allow_zero=True)
 
     def step(self) -> None:
         _core.step(self.model, self.data)
 
     def rollout(self, duration: float | None = None, record_every: int = 1,
                 callback: Callable[["Simulator"], None] | None = None) -> Trajectory:
-        """Simulate `duration` seconds (default: the scene's). The loop runs in C++ unless a
-        `callback(simulator)` is given, which then runs before every step (e.g. to set
-        data.tau_ff or data.q_target)."""
-        duration = self.scene.duration if duration is None else float(duration)
-        if duration < 0:
-            raise ValueError("duration must be >= 0")
-        if self.settings.mode == _core.IntegrationMode.adaptive:
+        """Simulate `duration` seconds (default: the scene's, or the `duration` override) from the
+        current state. The loop runs in C++ unless a `callback(simulator)` is given, which then
+        runs before every step (e.g. to set data.tau_ff or data.q_target). A duration shorter
+        than one step is refused; otherwise round(duration / dt) steps are taken."""
+        duration = self.duration if duration is None else _positive("duration", duration)
+        if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
+            raise ValueError(f"record_every must be an integer >= 1, got {record_every!r}")
+        if callback is not None and not callable(callback):
+            raise TypeError(f"callback must be callable, got {type(callback).__name__}")
+        settings = self.model.settings
+        if settings.mode == _core.IntegrationMode.adaptive:
             return self._rollout_adaptive(duration, callback)
-        n = int(round(duration / self.settings.dt))
+        n = int(round(duration / settings.dt))
+        if n < 1:
+            raise ValueError(f"duration {duration:g} s is shorter than one step (dt = {settings.dt:g} s)")
         if callback is None:
             rec = _rollout(self.model, self.data, n, record_every)
         else:
@@ -198,7 +318,10 @@ class Simulator:
             "max_penetration": float(max(0.0, -np.nanmin(np.where(np.isfinite(traj.gaps), traj.gaps, np.nan))))
             if np.isfinite(traj.gaps).any() else 0.0,
             "max_residual": float(traj.residual.max()),
-            "all_converged": bool(traj.converged[1:].all()) if len(traj.t) > 1 else True,
+            "all_converged": bool(traj.converged[1:].all()),
+            "unconverged_steps": int((~traj.converged[1:]).sum()),
+            "first_unconverged_t": float(traj.t[1:][~traj.converged[1:]][0]) if not traj.converged[1:].all()
+            else None,
             "settle_time": sc.settle_time,
             "base_drift": base_drift,
             "max_normal_velocity_while_sliding": max_vn_slip,
@@ -207,6 +330,42 @@ class Simulator:
             "max_foot_slip": slip,
             "max_foot_displacement": displacement,
         }
+
+
+def _vector(name: str, x, n: int) -> np.ndarray:
+    if x is None or isinstance(x, (str, bytes)):
+        raise TypeError(f"{name} must be an array of {n} numbers, got {type(x).__name__}")
+    a = np.asarray(x)
+    if a.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must be an array of {n} real numbers, got dtype {a.dtype}")
+    a = a.astype(np.float64).reshape(-1) if a.ndim <= 1 else a
+    if a.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},), got {np.shape(x)}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name} has NaN or infinite entries")
+    return a
+
+
+def _normalized_configuration(model, q: np.ndarray) -> np.ndarray:
+    from .scene import _quaternion_check
+
+    return _quaternion_check(model, q, "q")
+
+
+def _with_friction(scene: Scene, mu: float) -> Scene:
+    """A copy of the scene with every contact's friction coefficient set to mu."""
+
+    def copy_contact(c, cls, fields):
+        out = cls()
+        for f in fields:
+            setattr(out, f, getattr(c, f))
+        out.mu = mu
+        return out
+
+    sphere_fields = ("name", "frame", "offset", "radius", "halfspace", "planar")
+    contacts = [copy_contact(c, _core.SphereContact, sphere_fields) for c in scene.contacts]
+    pairs = [copy_contact(p, _core.GeometryPairContact, ("name", "pair", "max_contacts")) for p in scene.pairs]
+    return dataclasses.replace(scene, contacts=contacts, pairs=pairs, mu=mu)
 
 
 def sliding_acceleration(scene: Scene) -> float:

@@ -1,0 +1,325 @@
+"""The scene file schema: every key a scene TOML may hold, its type, range, default and meaning.
+
+A scene file is checked against this schema before anything is built
+(:func:`validate_scene`): an unknown key or table is an error naming the key, its table and
+the closest valid key; a wrong type, shape or range is an error naming the field and the value.
+Unknown input is never ignored, so a typo cannot silently run a different experiment.
+
+The same schema renders the reference of the scene keys in the documentation
+(:func:`reference_markdown`), so the docs cannot drift from what the loader accepts.
+"""
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+
+class SceneError(ValueError):
+    """A scene file (or dict) that does not follow the schema. The message is one line."""
+
+
+@dataclass(frozen=True)
+class Key:
+    """One key of a table.
+
+    kind: "str", "bool", "float", "int", "vector" (a list of numbers; `length` fixes its size),
+    "strings" (a list of strings), "pairs" (a list of [string, string]).
+    """
+
+    name: str
+    kind: str
+    doc: str
+    default: Any = None
+    required: bool = False
+    low: float | None = None  # inclusive unless low_open
+    high: float | None = None  # inclusive unless high_open
+    low_open: bool = False
+    high_open: bool = False
+    length: int | None = None
+    nonzero: bool = False  # vectors: not all zero (directions)
+    positive_entries: bool = False  # vectors: every entry > 0 (sizes)
+    choices: tuple[str, ...] | None = None
+    nonempty: bool = False  # lists
+
+
+@dataclass(frozen=True)
+class Table:
+    """A TOML table ([name]) or array of tables ([[name]], `array=True`)."""
+
+    name: str
+    doc: str
+    keys: tuple[Key, ...] = ()
+    tables: tuple["Table", ...] = ()
+    array: bool = False
+
+    def key(self, name: str) -> Key | None:
+        return next((k for k in self.keys if k.name == name), None)
+
+    def table(self, name: str) -> "Table | None":
+        return next((t for t in self.tables if t.name == name), None)
+
+    def names(self) -> list[str]:
+        return [k.name for k in self.keys] + [t.name for t in self.tables]
+
+
+_VEC3 = dict(kind="vector", length=3)
+
+GROUND = Table("ground", "The ground plane z = 0; a slope tilts gravity (downhill = +x).", (
+    Key("slope_deg", "float", "slope angle in degrees (gravity tilted about y)", 0.0, low=-89.0, high=89.0),
+    Key("mu", "float", "friction coefficient of every contact unless a wall or pair sets its own", 0.5, low=0.0),
+))
+
+CONTACTS = Table("contacts", "Which points of the robot touch the ground (analytic sphere/point contacts).", (
+    Key("feet", "bool", "a sphere at each foot frame of a bundled robot (default: true when it has feet)"),
+    Key("radius", "float", "sphere radius in m for `feet` and `frames` (default: the robot's foot radius, "
+        "0 for frames)", low=0.0),
+    Key("frames", "strings", "extra frames carrying a contact sphere of `radius`", ()),
+    Key("soles", "bool", "the sole corner points of a bundled humanoid", True),
+    Key("box_corners", "bool", "the 8 corners of the URDF's box visual as contact points", False),
+))
+
+CONTROL = Table("control", "Joint PD towards the initial posture (or `q_target`), implicit in time stepping.", (
+    Key("kp", "float", "joint stiffness in N m/rad", 0.0, low=0.0),
+    Key("kd", "float", "joint damping in N m s/rad", 0.0, low=0.0),
+    Key("q_target", "vector", "joint positions the PD holds (nq minus the free flyer's 7)"),
+    Key("gravity_feedforward", "bool", "add tau_ff = g(q_target)", False),
+    Key("lock_joints", "bool", "hold every joint at its initial value (a rigid robot)", False),
+))
+
+INITIAL = Table("initial", "The initial state.", (
+    Key("q", "vector", "the full configuration (nq entries; quaternions x, y, z, w, non-zero)"),
+    Key("base_velocity", "vector", "free-flyer velocity [vx, vy, vz, wx, wy, wz] (local frame)", length=6),
+    Key("base_xy", "vector", "free-flyer x, y position", length=2),
+    Key("drop", "float", "height in m above touching the ground", 0.0, low=0.0),
+    Key("top_velocity", "vector", "`bodies` scenes: velocity of the top body (6 entries)", length=6),
+))
+
+WALLS = Table("walls", "Extra fixed half-spaces {x : normal . x >= offset} and the spheres that touch them.", (
+    Key("name", "str", "a name for messages and recordings"),
+    Key("normal", "vector", "outward normal of the free space (world frame)", required=True, length=3,
+        nonzero=True),
+    Key("offset", "float", "free space: normal . x >= offset (normal normalised)", required=True),
+    Key("frames", "strings", "frames carrying a sphere against this wall", ()),
+    Key("radius", "float", "sphere radius in m", 0.0, low=0.0),
+    Key("offset_in_frame", "vector", "sphere centre in the frame", (0.0, 0.0, 0.0), length=3),
+    Key("mu", "float", "friction coefficient (default: [ground] mu)", low=0.0),
+), array=True)
+
+ANCHORS = Table("anchors", "Point anchors: 3 bilateral rows each (paper §3), to the world or to another body.", (
+    Key("name", "str", "a name for messages"),
+    Key("frame", "str", "the frame of the held point", required=True),
+    Key("offset", "vector", "the point in `frame`", (0.0, 0.0, 0.0), length=3),
+    Key("target", "vector", "world point it is held to (default: where it is at q0)", length=3),
+    Key("frame2", "str", "hold it to a point of this frame instead (a closed loop)"),
+    Key("offset2", "vector", "the point in `frame2`", (0.0, 0.0, 0.0), length=3),
+), array=True)
+
+BOXES = Table("boxes", "Fixed world boxes for the coal pairs.", (
+    Key("name", "str", "geometry name used in `pairs`", required=True),
+    Key("size", "vector", "edge lengths in m", required=True, length=3, positive_entries=True),
+    Key("position", "vector", "centre in the world", (0.0, 0.0, 0.0), length=3),
+), array=True)
+
+COLLISION = Table("collision", "General shapes through coal: pairs among the URDF's collision geometries, "
+                  "\"ground\" (the plane z = 0) and fixed world boxes.", (
+    Key("pairs", "pairs", "[[geometry a, geometry b], ...]", required=True, nonempty=True),
+    Key("mu", "float", "friction coefficient of the pairs (default: [ground] mu)", low=0.0),
+    Key("max_contacts", "int", "contact points per pair", 4, low=1, high=64),
+), tables=(BOXES,))
+
+SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf` or `bodies`, the ground, contacts, control, "
+              "the initial state.", (
+    Key("name", "str", "scene name (default: the file name)"),
+    Key("description", "str", "one line shown by `stiction scenes`", ""),
+    Key("robot", "str", "a bundled robot (stiction.robots.ROBOTS)"),
+    Key("urdf", "str", "a URDF path (relative paths: the bundled robots directory, then the scene's folder)"),
+    Key("free_flyer", "bool", "`urdf`: a free-flyer root joint", True),
+    Key("bodies", "strings", "free-flying URDF boxes stacked in the listed order", nonempty=True),
+    Key("duration", "float", "seconds simulated by default", 2.0, low=0.0, low_open=True),
+    Key("dt", "float", "time step in s", 1e-3, low=0.0, low_open=True),
+    Key("settle_time", "float", "seconds excluded from the drift and slip measures", 0.0, low=0.0),
+    Key("mode", "str", "integration: time stepping (eq. 70) or the relaxed DAI as an ODE (eq. 64)", "timestep",
+        choices=("timestep", "rk4", "ode", "adaptive")),
+    Key("delta", "float", "ODE modes: Baumgarte delta in s (0: dt)", 0.0, low=0.0),
+    Key("zeta", "float", "ODE modes: Baumgarte zeta", 0.5, low=0.0, low_open=True),
+), tables=(GROUND, CONTACTS, CONTROL, INITIAL, WALLS, ANCHORS, COLLISION))
+
+
+def _where(path: str) -> str:
+    return f"[{path}]" if path else "the top level"
+
+
+def _closest(name: str, options: list[str]) -> str:
+    match = difflib.get_close_matches(name, options, n=1, cutoff=0.5)
+    return f" (did you mean {match[0]!r}?)" if match else f" (valid: {', '.join(options)})"
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _check_value(key: Key, value, where: str) -> Any:
+    label = f"{where}.{key.name}" if where else key.name
+
+    def fail(expected: str):
+        raise SceneError(f"{label} = {value!r}: {expected}")
+
+    def in_range(x: float) -> bool:
+        if key.low is not None and (x < key.low or (key.low_open and x == key.low)):
+            return False
+        if key.high is not None and (x > key.high or (key.high_open and x == key.high)):
+            return False
+        return True
+
+    def range_text() -> str:
+        lo = "" if key.low is None else f"{'>' if key.low_open else '>='} {key.low:g}"
+        hi = "" if key.high is None else f"{'<' if key.high_open else '<='} {key.high:g}"
+        return " and ".join(p for p in (lo, hi) if p)
+
+    if key.kind == "str":
+        if not isinstance(value, str):
+            fail("must be a string")
+        if key.choices is not None and value not in key.choices:
+            fail(f"must be one of {', '.join(key.choices)}")
+        return value
+    if key.kind == "bool":
+        if not isinstance(value, bool):
+            fail("must be true or false")
+        return value
+    if key.kind in ("float", "int"):
+        if not _is_number(value) or (key.kind == "int" and not isinstance(value, int)):
+            fail("must be " + ("an integer" if key.kind == "int" else "a number"))
+        if not math.isfinite(value):
+            fail("must be finite")
+        if not in_range(value):
+            fail(f"must be {range_text()}")
+        return int(value) if key.kind == "int" else float(value)
+    if key.kind == "vector":
+        if not isinstance(value, list) or not all(_is_number(x) for x in value):
+            fail("must be a list of numbers" + (f" ({key.length} entries)" if key.length else ""))
+        if key.length is not None and len(value) != key.length:
+            fail(f"must have {key.length} entries, got {len(value)}")
+        if not all(math.isfinite(x) for x in value):
+            fail("entries must be finite")
+        if key.nonzero and not any(x != 0 for x in value):
+            fail("must not be the zero vector")
+        if key.positive_entries and not all(x > 0 for x in value):
+            fail("entries must be > 0")
+        return [float(x) for x in value]
+    if key.kind == "strings":
+        if not isinstance(value, list) or not all(isinstance(x, str) for x in value):
+            fail("must be a list of strings")
+        if key.nonempty and not value:
+            fail("must not be empty")
+        return list(value)
+    if key.kind == "pairs":
+        if (not isinstance(value, list) or not all(isinstance(p, list) and len(p) == 2 and
+                                                   all(isinstance(x, str) for x in p) for p in value)):
+            fail("must be a list of [name, name] pairs")
+        if key.nonempty and not value:
+            fail("must not be empty")
+        return [list(p) for p in value]
+    raise AssertionError(f"schema: unknown kind {key.kind}")
+
+
+def _validate_table(table: Table, cfg, path: str, present: bool = True) -> dict:
+    """The table with defaults filled in; `present=False` for an absent table (defaults only,
+    no required keys)."""
+    if not isinstance(cfg, dict):
+        raise SceneError(f"{_where(path) if path else 'the scene'} must be a table, got {cfg!r}")
+    out: dict = {}
+    for name, value in cfg.items():
+        key, sub = table.key(name), table.table(name)
+        if key is None and sub is None:
+            raise SceneError(f"unknown key {name!r} in {_where(path)}{_closest(name, table.names())}")
+        child = f"{path}.{name}" if path else name
+        if key is not None:
+            out[name] = _check_value(key, value, path)
+        elif sub.array:
+            if isinstance(value, dict):
+                raise SceneError(f"{child} must be an array of tables: write [[{child}]], not [{child}]")
+            if not isinstance(value, list):
+                raise SceneError(f"{child} must be an array of tables ([[{child}]]), got {value!r}")
+            out[name] = [_validate_table(sub, item, f"{child}[{i}]") for i, item in enumerate(value)]
+        else:
+            if isinstance(value, list):
+                raise SceneError(f"{child} must be a table: write [{child}], not [[{child}]]")
+            out[name] = _validate_table(sub, value, child)
+    for key in table.keys:
+        if key.name not in out:
+            if key.required and present:
+                raise SceneError(f"{_where(path)}: missing required key {key.name!r} ({key.doc})")
+            out[key.name] = list(key.default) if isinstance(key.default, tuple) else key.default
+    for sub in table.tables:
+        if sub.name not in out:
+            out[sub.name] = [] if sub.array else _validate_table(sub, {}, f"{path}.{sub.name}" if path else sub.name,
+                                                                 present=False)
+    return out
+
+
+def validate_scene(cfg: dict, source: str = "scene") -> dict:
+    """Check a scene (the dict of a TOML file) against the schema; return it with every default
+    filled in. Raises SceneError (a ValueError) with one line naming the file, field and value."""
+    try:
+        out = _validate_table(SCENE, cfg, "")
+        given = [k for k in ("robot", "urdf", "bodies") if k in cfg]
+        if len(given) != 1:
+            raise SceneError("a scene needs exactly one of `robot`, `urdf` or `bodies`" +
+                             (f", got {', '.join(given)}" if given else ""))
+        if out["mode"] == "timestep" and "delta" in cfg:
+            raise SceneError("delta applies to the ODE modes (mode = rk4, ode or adaptive) only")
+        for i, a in enumerate(out["anchors"]):
+            if a["target"] is not None and a["frame2"] is not None:
+                raise SceneError(f"anchors[{i}]: give `target` or `frame2`, not both")
+    except SceneError as exc:
+        raise SceneError(f"{source}: {exc}") from None
+    return out
+
+
+# ---- documentation
+
+def _default_text(key: Key) -> str:
+    if key.required:
+        return "required"
+    if key.default is None:
+        return "—"
+    if isinstance(key.default, bool):
+        return "true" if key.default else "false"
+    if isinstance(key.default, str):
+        return f'"{key.default}"'
+    if isinstance(key.default, (tuple, list)):
+        return "[" + ", ".join(f"{x:g}" if _is_number(x) else repr(x) for x in key.default) + "]"
+    return f"{key.default:g}"
+
+
+def _type_text(key: Key) -> str:
+    base = {"str": "string", "bool": "bool", "float": "number", "int": "integer", "strings": "list of strings",
+            "pairs": "list of [name, name]"}.get(key.kind, "list of numbers")
+    if key.kind == "vector" and key.length:
+        base = f"{key.length} numbers"
+    if key.choices:
+        base += " (" + " | ".join(key.choices) + ")"
+    lo = "" if key.low is None else f"{'>' if key.low_open else '≥'} {key.low:g}"
+    hi = "" if key.high is None else f"{'<' if key.high_open else '≤'} {key.high:g}"
+    rng = ", ".join(p for p in (lo, hi) if p)
+    return f"{base}, {rng}" if rng else base
+
+
+def reference_markdown() -> str:
+    """The scene keys as Markdown tables, one per table of the schema (for the docs)."""
+    lines = ["# Scene file keys", "",
+             "Generated from `stiction.scene_schema` (the schema the loader enforces). Unknown keys are errors.", ""]
+
+    def emit(table: Table, heading: str):
+        lines.extend([f"## {heading}", "", table.doc, "", "| key | type | default | meaning |", "|---|---|---|---|"])
+        for k in table.keys:
+            lines.append(f"| `{k.name}` | {_type_text(k)} | {_default_text(k)} | {k.doc} |")
+        lines.append("")
+        for sub in table.tables:
+            name = heading.strip("[]") + "." + sub.name if table is not SCENE else sub.name
+            emit(sub, f"[[{name}]]" if sub.array else f"[{name}]")
+
+    emit(SCENE, "Top level")
+    return "\n".join(lines)
