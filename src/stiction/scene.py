@@ -187,9 +187,10 @@ def load_scene(name_or_path: str | os.PathLike) -> Scene:
     return build_scene(cfg, default_name=p.stem, source=str(p), base_dir=p.parent)
 
 
-def _quaternion_check(model: pin.Model, q: np.ndarray, field: str) -> np.ndarray:
-    """Normalise the quaternions of free-flyer and spherical joints in q; a zero (or far from
-    unit) quaternion is an error naming the joint."""
+def _quaternion_check(model: pin.Model, q: np.ndarray, field: str, strict: bool = True) -> np.ndarray:
+    """Normalise the quaternions of free-flyer and spherical joints in q; a zero quaternion (with
+    `strict`, one whose norm is not within 10 % of 1: likely a typo in a scene file) is an error
+    naming the joint."""
     q = q.copy()
     for j in range(1, model.njoints):
         kind = model.joints[j].shortname()
@@ -198,7 +199,7 @@ def _quaternion_check(model: pin.Model, q: np.ndarray, field: str) -> np.ndarray
             continue
         i = model.joints[j].idx_q + start
         norm = float(np.linalg.norm(q[i:i + 4]))
-        if not 0.9 < norm < 1.1:
+        if not (0.9 < norm < 1.1 if strict else norm > 1e-12):
             raise SceneError(f"{field}: the quaternion of joint {model.names[j]!r} (entries {i}..{i + 3}) has "
                              f"norm {norm:g}; give a unit quaternion (x, y, z, w)")
         q[i:i + 4] /= norm

@@ -155,6 +155,10 @@ class Simulator:
         if mode not in _MODES:
             raise ValueError(f"mode must be one of {', '.join(_MODES)}, got {mode!r}")
         s.mode = _core.IntegrationMode.values[_MODES[mode]]
+        if mode == "timestep":
+            for key in ("delta", "zeta", "ode_tolerance"):
+                if key in overrides:
+                    raise ValueError(f"{key} applies to the ODE modes (mode rk4, ode or adaptive), not to time stepping")
         s.delta = _positive("delta", overrides.get("delta", sc.delta), allow_zero=True)
         s.zeta = _positive("zeta", overrides.get("zeta", sc.zeta))
         s.tolerance = _positive("tolerance", overrides.get("tolerance", 1e-10))
@@ -349,7 +353,7 @@ def _vector(name: str, x, n: int) -> np.ndarray:
 def _normalized_configuration(model, q: np.ndarray) -> np.ndarray:
     from .scene import _quaternion_check
 
-    return _quaternion_check(model, q, "q")
+    return _quaternion_check(model, q, "q", strict=False)
 
 
 def _with_friction(scene: Scene, mu: float) -> Scene:
