@@ -6,13 +6,21 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.requirements-installed
 BUILD_TYPE ?= Release
 
-.PHONY: demo test build clean chromium
+.PHONY: demo test build clean chromium docs wheel-smoke
 
 demo: build
 	$(BIN)/stiction demo
 
 test: build chromium
 	$(BIN)/python -m pytest -q
+
+# The API reference (Sphinx; every warning is an error): build/docs/index.html
+docs: build
+	$(BIN)/python -m sphinx -W --keep-going -q -b html docs/api build/docs
+
+# Build a wheel in isolation, install it into a fresh venv with no extras, use it from /tmp
+wheel-smoke:
+	PYTHON=$(PYTHON) .ci/wheel-smoke
 
 # Headless Chromium checks the HTML recordings (tests/test_recording.py): Debian's
 # chromium, installed when missing and we may (root + apt-get).

@@ -1,36 +1,45 @@
-"""Simulate a pinocchio.Model you built yourself: a ball dropped on a slope, rolling.
+"""Simulate a robot you loaded yourself: your pinocchio.Model goes straight into stiction.
 
-Run: .venv/bin/python examples/custom_model.py
+Solo-12 is loaded here with plain Pinocchio from its URDF (example-robot-data's files; use your
+own path), put in its SRDF standing posture, given sphere feet, and simulated standing on flat
+ground under a joint PD. Then a ball (also your own model) rolls down a 20° slope without slipping.
+
+Run from anywhere: python examples/custom_model.py
 """
 import numpy as np
 import pinocchio as pin
 
-from stiction import _core
-from stiction.scene import build_scene
+from stiction.robots import robots_dir  # where example-robot-data keeps its robot files
+from stiction.scene import scene_from_model
 from stiction.simulator import Simulator
 
-# A scene from a dict (the same keys as robots/scenes/*.toml): the ball URDF, a 20° slope.
-scene = build_scene({"urdf": "ball.urdf", "ground": {"slope_deg": 20.0, "mu": 0.8}, "settle_time": 0.1,
-                     "contacts": {"frames": ["ball"], "radius": 0.05}, "duration": 1.0})
-sim = Simulator(scene)
-traj = sim.rollout()
-a = sim.summary(traj)["mean_acceleration_along_slope"]  # world-frame base velocity, after 0.1 s
-# A solid ball rolls without slipping: a = (5/7) g sin(theta)
-print(f"ball acceleration {a:.5f} m/s^2, rolling theory {5 / 7 * 9.81 * np.sin(np.radians(20)):.5f}")
-print("contact state at the end:", _core.ContactState.values[int(traj.states[-1, 0])], "(rolling = sticking)")
+# ---- your robot, loaded by you
+erd = robots_dir()
+urdf = erd / "solo_description/robots/solo12.urdf"
+model = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+visual = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.VISUAL, package_dirs=[str(erd.parents[1])])
+pin.loadReferenceConfigurations(model, str(erd / "solo_description/srdf/solo.srdf"), False)
+q0 = model.referenceConfigurations["standing"].copy()
 
-# Or pass your own pinocchio.Model straight to the C++ simulator (here: the same ball, flat ground):
-model = pin.buildModelFromUrdf("robots/ball.urdf", pin.JointModelFreeFlyer())
-ground = _core.HalfSpace()
-contact = _core.SphereContact()
-contact.frame, contact.radius, contact.mu = model.getFrameId("ball"), 0.05, 0.8
-settings = _core.SimulatorSettings()
-sim_model = _core.SimulatorModel(model, [ground], [contact], [], settings)
-data = _core.SimulatorData(sim_model)
-q = pin.neutral(model)
-q[2] = 0.05
-data.q = q
-for _ in range(100):
-    _core.step(sim_model, data)
-force = np.asarray(data.candidate_lambda).reshape(3, -1)[:, 0]  # 3 x contacts (t1, t2, n)
-print("after 0.1 s: base", np.round(data.q[:3], 6), "contact force", np.round(force, 4), "N (m g = 4.905)")
+feet = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
+scene = scene_from_model(model, visual, q0, name="my-solo", spheres=[(f, 0.016) for f in feet], mu=1.0,
+                         kp=20.0, kd=0.2, duration=1.0, settle_time=0.3)
+sim = Simulator(scene)
+summary = sim.summary(sim.rollout())
+mass = sum(inertia.mass for inertia in model.inertias)
+print(f"Solo-12 standing 1 s: {summary['steps']} steps, {summary['us_per_step']:.1f} µs/step, "
+      f"foot slip {summary['max_foot_slip']:.1e} m, penetration {summary['max_penetration']:.1e} m")
+normal_force = float(np.asarray(sim.data.candidate_lambda).reshape(3, -1)[2].sum())
+print(f"   feet carry {normal_force:.3f} N, m g = {mass * 9.81:.3f} N")
+
+# ---- a ball of your own on a slope: it rolls, a = (5/7) g sin(theta)
+ball = pin.Model()
+radius, m = 0.05, 0.5
+joint = ball.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "ball")
+ball.appendBodyToJoint(joint, pin.Inertia(m, np.zeros(3), np.eye(3) * 0.4 * m * radius**2), pin.SE3.Identity())
+ball.addBodyFrame("ball", joint, pin.SE3.Identity(), 0)
+scene = scene_from_model(ball, spheres=[("ball", radius)], mu=0.8, slope_deg=20.0, duration=1.0, settle_time=0.1)
+sim = Simulator(scene)
+a = sim.summary(sim.rollout())["mean_acceleration_along_slope"]
+print(f"ball on a 20° slope: a = {a:.6f} m/s², rolling theory (5/7) g sin θ = "
+      f"{5 / 7 * 9.81 * np.sin(np.radians(20)):.6f} m/s²")

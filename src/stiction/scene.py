@@ -4,29 +4,12 @@ the initial state and the control. Every scene is a TOML file in ``robots/scenes
 A slope of angle θ is modelled by tilting gravity, g = 9.81 (sin θ, 0, -cos θ): the ground stays
 the plane z = 0 and "downhill" is +x. Recordings rotate the picture back.
 
-Keys (all optional unless stated):
-
-    name, description
-    robot = "solo12"                      # a name of stiction.robots.ROBOTS, or
-    urdf = "cube.urdf"                    # a URDF path (relative to robots/), with free_flyer = true
-    bodies = ["cube.urdf", "cube.urdf"]   # several free-flying URDF bodies, stacked in the listed order
-    duration, dt, settle_time             # seconds
-    mode = "timestep" | "rk4" | "adaptive"; delta, zeta (ODE modes)
-    [ground]   slope_deg, mu
-    [contacts] feet = true (the robot's foot spheres), radius, box_corners = true (URDF box visuals)
-    [control]  kp, kd (joint PD towards the initial posture, or q_target = [...]),
-               gravity_feedforward = true (tau_ff = g(q_target)), lock_joints = true (a rigid robot)
-    [initial]  q = [...] (full configuration), base_velocity = [vx, vy, vz, wx, wy, wz],
-               base_xy = [x, y], drop = 0.0 (m above touch)
-    [[walls]]  name, normal, offset (free space: normal . x >= offset), frames (spheres on them),
-               radius, mu
-    [[anchors]] frame, offset (in the frame), target (world; default: where the point is at q0),
-               or frame2, offset2 (a point of another body: a closed loop): 3 bilateral rows
-               each (paper §3)
-    [collision] general shapes through coal, for what the analytic spheres and points do not
-               cover: pairs = [["geometry a", "geometry b"], ...] among the URDF's collision
-               geometries, "ground" (the plane z = 0) and fixed world boxes
-               [[collision.boxes]] name, size = [x, y, z], position = [x, y, z]; max_contacts
+Every key a scene file may hold is defined, with its type, range, default and meaning, in
+:mod:`stiction.scene_schema` (rendered in the docs as the scene key reference); the loader
+validates a scene against it before building anything. In short: one of ``robot`` (a bundled
+robot), ``urdf`` (a URDF path) or ``bodies`` (stacked boxes); ``[ground]`` slope and friction;
+``[contacts]`` the sphere/point contacts; ``[control]`` joint PD; ``[initial]`` the state;
+``[[walls]]``, ``[[anchors]]`` and ``[collision]`` (coal pairs, ``[[collision.boxes]]``).
 """
 from __future__ import annotations
 
