@@ -193,7 +193,9 @@ def build_scene(cfg: dict, default_name: str = "scene", source: str | None = Non
                 base_dir: str | os.PathLike | None = None) -> Scene:
     """A Scene from a scene dict (the keys of a scene TOML file, see :mod:`stiction.scene_schema`).
     The dict is validated first; nothing is built from an invalid one."""
-    source = source or f"scene {cfg.get('name', default_name)!r}" if isinstance(cfg, dict) else "scene"
+    if source is None:
+        name = cfg.get("name") if isinstance(cfg, dict) else None
+        source = f"scene {name if isinstance(name, str) else default_name!r}"
     cfg = validate_scene(cfg, source)
     try:
         return _build_scene(cfg, default_name, base_dir)
@@ -414,17 +416,35 @@ def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = 
     handled by coal; the name "ground" is the plane z = 0 (added to a copy of the model).
     With place_on_ground the free-flyer base is lowered so the lowest sphere touches.
     """
+    if not isinstance(model, pin.Model):
+        raise TypeError(f"model must be a pinocchio.Model, got {type(model).__name__}")
+    for label, gm in (("visual_model", visual_model), ("collision_model", collision_model)):
+        if gm is not None and not isinstance(gm, pin.GeometryModel):
+            raise TypeError(f"{label} must be a pinocchio.GeometryModel or None, got {type(gm).__name__}")
+    checked = validate_scene({"urdf": "-", "ground": {"mu": mu, "slope_deg": slope_deg}, "control": {"kp": kp, "kd": kd},
+                              "dt": dt, "duration": duration, "settle_time": settle_time}, "scene_from_model")
+    mu, slope_deg, kp, kd = checked["ground"]["mu"], checked["ground"]["slope_deg"], checked["control"]["kp"], \
+        checked["control"]["kd"]
+    dt, duration, settle_time = checked["dt"], checked["duration"], checked["settle_time"]
+    if isinstance(max_contacts, bool) or not isinstance(max_contacts, int) or not 1 <= max_contacts <= 64:
+        raise ValueError(f"max_contacts must be an integer in 1..64, got {max_contacts!r}")
     model = model.copy()
     visual_model = visual_model if visual_model is not None else pin.GeometryModel()
-    q = pin.neutral(model) if q0 is None else np.asarray(q0, dtype=float).copy()
-    if q.shape != (model.nq,):
-        raise ValueError(f"q0 needs nq = {model.nq} entries, got {q.shape}")
+    if q0 is None:
+        q = pin.neutral(model)
+    else:
+        from .simulator import _vector
+
+        q = _quaternion_check(model, _vector("q0", q0, model.nq), "q0", strict=False)
     contacts = []
-    for spec in spheres:
-        frame, radius = spec[0], float(spec[1])
+    for k, spec in enumerate(spheres):
+        if isinstance(spec, (str, bytes)) or not hasattr(spec, "__len__") or len(spec) not in (2, 3):
+            raise ValueError(f"spheres[{k}] must be (frame name, radius) or (frame name, radius, offset), got {spec!r}")
+        frame = spec[0]
+        radius = validate_scene({"urdf": "-", "contacts": {"radius": spec[1]}}, f"spheres[{k}]")["contacts"]["radius"]
         offset = spec[2] if len(spec) > 2 else (0.0, 0.0, 0.0)
-        if not model.existFrame(frame):
-            raise ValueError(f"spheres: no frame {frame!r} in the model")
+        if not isinstance(frame, str) or not model.existFrame(frame):
+            raise ValueError(f"spheres[{k}]: no frame {frame!r} in the model")
         contacts.append(_sphere(frame, model.getFrameId(frame), offset, radius, 0, mu))
     th = math.radians(slope_deg)
     model.gravity = pin.Motion(np.array([GRAVITY * math.sin(th), 0.0, -GRAVITY * math.cos(th)]), np.zeros(3))
