@@ -187,3 +187,10 @@ def test_package_uri_meshes_of_a_user_urdf(tmp_path):
     sc = build_scene({"urdf": str(pkg / "urdf" / "tet.urdf"), "contacts": {"frames": ["tet"], "radius": 0.02}})
     paths = [g.meshPath for g in sc.visual_model.geometryObjects]
     assert paths and paths[0] == str(pkg / "meshes" / "tet.stl")
+
+
+def test_docs_scene_keys_page_is_current():
+    from pathlib import Path
+
+    page = Path(__file__).resolve().parents[1] / "docs" / "scene-keys.md"
+    assert page.read_text() == reference_markdown() + "\n", "regenerate docs/scene-keys.md (see its header)"

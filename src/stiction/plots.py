@@ -7,7 +7,11 @@ import numpy as np
 
 
 def plot_trajectory(sim, traj, path: str | os.PathLike) -> None:
-    import matplotlib
+    """Write a PNG (or PDF/SVG, by the suffix) of the base position, foot slip and contact forces
+    of a rollout. Needs the optional extra ``stiction[plot]`` (matplotlib)."""
+    from ._optional import require
+
+    matplotlib = require("matplotlib", "plot", "plots")
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

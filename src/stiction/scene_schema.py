@@ -134,7 +134,7 @@ SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf` or `bodies`, the
     Key("name", "str", "scene name (default: the file name)"),
     Key("description", "str", "one line shown by `stiction scenes`", ""),
     Key("robot", "str", "a bundled robot (stiction.robots.ROBOTS)"),
-    Key("urdf", "str", "a URDF path (relative paths: the bundled robots directory, then the scene's folder)"),
+    Key("urdf", "str", "a URDF path (relative: to the scene file's folder, then the bundled robots)"),
     Key("free_flyer", "bool", "`urdf`: a free-flyer root joint", True),
     Key("bodies", "strings", "free-flying URDF boxes stacked in the listed order", nonempty=True),
     Key("duration", "float", "seconds simulated by default", 2.0, low=0.0, low_open=True),
@@ -300,7 +300,7 @@ def _type_text(key: Key) -> str:
     if key.kind == "vector" and key.length:
         base = f"{key.length} numbers"
     if key.choices:
-        base += " (" + " | ".join(key.choices) + ")"
+        base += " (" + ", ".join(key.choices) + ")"
     lo = "" if key.low is None else f"{'>' if key.low_open else '≥'} {key.low:g}"
     hi = "" if key.high is None else f"{'<' if key.high_open else '≤'} {key.high:g}"
     rng = ", ".join(p for p in (lo, hi) if p)
@@ -310,7 +310,9 @@ def _type_text(key: Key) -> str:
 def reference_markdown() -> str:
     """The scene keys as Markdown tables, one per table of the schema (for the docs)."""
     lines = ["# Scene file keys", "",
-             "Generated from `stiction.scene_schema` (the schema the loader enforces). Unknown keys are errors.", ""]
+             "Generated from `stiction.scene_schema` (the schema the loader enforces; regenerate with",
+             "`python -c \"from stiction.scene_schema import reference_markdown as r; print(r())\" > docs/scene-keys.md`).",
+             "Unknown keys are errors; so are wrong types, shapes and ranges.", ""]
 
     def emit(table: Table, heading: str):
         lines.extend([f"## {heading}", "", table.doc, "", "| key | type | default | meaning |", "|---|---|---|---|"])
