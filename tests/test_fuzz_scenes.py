@@ -115,6 +115,10 @@ def test_malformed_scenes_are_refused_or_simulated_honestly(cfg):
         return
     try:
         sim = Simulator(scene)
+        if 0.005 / sim.dt > 5000:  # keep the fuzz quick: tiny steps are tested for refusal only
+            with pytest.raises(ValueError, match="more than one rollout takes"):
+                sim.rollout(0.005 * 1e9 * sim.dt / 0.005 * 2.0)
+            return
         traj = sim.rollout(0.005)
     except (*ACCEPTED, RuntimeError) as exc:
         _one_line(exc)
@@ -174,3 +178,11 @@ def test_plausible_numbers_build_and_simulate_or_are_refused(base, changes):
     for (path, _), value in changes:
         _set(cfg, path, value)
     test_malformed_scenes_are_refused_or_simulated_honestly.hypothesis.inner_test(cfg)
+
+
+def test_absurd_step_counts_are_refused_before_simulating():
+    sim = Simulator("cube-slide", dt=1e-300)
+    with pytest.raises(ValueError, match="more than one rollout takes"):
+        sim.rollout(1.0)
+    with pytest.raises(ValueError, match="GB; record less often"):
+        Simulator("solo12-stand", dt=1e-7).rollout(10.0)

@@ -81,6 +81,8 @@ OVERRIDES = {
     "ode_tolerance": "adaptive mode: local error tolerance",
 }
 _MODES = {"timestep": 0, "rk4": 1, "ode": 1, "adaptive": 2}
+MAX_RECORD_BYTES = 4e9  # a trajectory larger than this is refused before simulating
+MAX_STEPS = 1e9  # steps in one rollout (a C++ int counts them; a typo'd dt must not hang or overflow)
 
 
 def _positive(name: str, value, allow_zero: bool = False) -> float:
@@ -228,9 +230,19 @@ class Simulator:
         settings = self.model.settings
         if settings.mode == _core.IntegrationMode.adaptive:
             return self._rollout_adaptive(duration, callback)
-        n = int(round(duration / settings.dt))
-        if n < 1:
+        steps = duration / settings.dt
+        if steps < 0.5:
             raise ValueError(f"duration {duration:g} s is shorter than one step (dt = {settings.dt:g} s)")
+        if steps > MAX_STEPS:
+            raise ValueError(f"duration {duration:g} s at dt = {settings.dt:g} s is {steps:.3g} steps, more than "
+                             f"one rollout takes ({MAX_STEPS:.0e}); use a larger dt or a shorter duration")
+        n = int(round(steps))
+        nc = self.model.num_candidates
+        record_bytes = (n // record_every + 1) * (self.model.nq + self.model.nv + 8 * nc + 12) * 8
+        if record_bytes > MAX_RECORD_BYTES:
+            raise ValueError(f"recording {n} steps every {record_every} would take {record_bytes / 1e9:.1f} GB; "
+                             f"record less often (record_every = {math.ceil(record_bytes / MAX_RECORD_BYTES * record_every)}"
+                             " or more) or simulate less")
         if callback is None:
             rec = _rollout(self.model, self.data, n, record_every)
         else:
