@@ -30,8 +30,11 @@ class FclibFormatError(ValueError):
     field (e.g. ``fclib_local/W/i``); ``path`` and ``field`` hold them."""
 
     def __init__(self, path: str, field: str, message: str):
-        self.path, self.field = path, field
+        self.path, self.field, self.message = path, field, message
         super().__init__(f"{path}: {field}: {message}" if field else f"{path}: {message}")
+
+    def __reduce__(self):
+        return type(self), (self.path, self.field, self.message)
 
 
 @dataclass
@@ -40,7 +43,7 @@ class FclibProblem:
 
     name: str
     kind: str  # "fclib_local" | "fclib_global" | "siconos_dat"
-    A: np.ndarray  # (3nc, 3nc), as stored (not symmetrised)
+    A: np.ndarray  # (3nc, 3nc): W as stored; global files: Hᵀ M⁻¹ H (info says how M was read)
     b: np.ndarray  # (3nc,)
     mu: np.ndarray  # (nc,)
     guess: np.ndarray | None = None  # λ of /guesses/1, permuted, if the file has one
@@ -188,7 +191,7 @@ class _Group:
             raise self.error(key, "expected one integer, found none")
         val = int(v[0])
         if not lo <= val <= hi:
-            raise self.error(key, f"= {val}, outside [{lo}, {hi}]")
+            raise self.error(key, f"{val} is outside [{lo}, {hi}]")
         return val
 
     def sparse(self, shape: tuple[int, int], shape_source: str) -> sp.csr_matrix:
@@ -203,7 +206,7 @@ class _Group:
         p, i, x = self.vector("p", integer=True), self.vector("i", integer=True), self.vector("x")
         if nz >= 0:  # triplet (CSparse convention: i = row, p = column)
             if nzmax is not None and nz > nzmax:
-                raise self.error("nz", f"= {nz} entries, more than nzmax = {nzmax}")
+                raise self.error("nz", f"{nz} entries declared, more than nzmax = {nzmax}")
             for key, arr in (("p", p), ("i", i), ("x", x)):
                 if len(arr) < nz:
                     raise self.error(key, f"has {len(arr)} entries, nz = {nz} declared")
@@ -212,7 +215,7 @@ class _Group:
             _check_indices(self.path, self.field("p"), cols, n, "column")
             return sp.coo_matrix((vals, (rows, cols)), shape=(m, n)).tocsr()
         if nz not in (-1, -2):
-            raise self.error("nz", f"= {nz}: unknown storage (>= 0 triplet, -1 CSC, -2 CSR)")
+            raise self.error("nz", f"{nz} is no FCLib storage (>= 0 triplet, -1 CSC, -2 CSR)")
         outer, inner = (n, m) if nz == -1 else (m, n)
         label = "CSC: n + 1" if nz == -1 else "CSR: m + 1"
         if len(p) != outer + 1:
@@ -224,9 +227,10 @@ class _Group:
             k = _first_bad(dp < 0)
             raise self.error("p", f"decreases at position {k + 1} ({p[k]} -> {p[k + 1]})")
         nnz = int(p[-1])
-        for key, arr in (("i", i), ("x", x)):
-            if nnz > len(arr):
-                raise self.error(key, f"has {len(arr)} entries, p[-1] = {nnz} needs them")
+        if nnz > len(i):
+            raise self.error("p", f"p[-1] = {nnz} but i has {len(i)} entries")
+        if nnz > len(x):
+            raise self.error("x", f"has {len(x)} entries, p[-1] = {nnz} needs them")
         if nzmax is not None and nnz > nzmax:
             raise self.error("p", f"p[-1] = {nnz} entries, more than nzmax = {nzmax}")
         idx = i[:nnz]
@@ -238,7 +242,7 @@ class _Group:
         if self.has("spacedim"):
             d = self.integer("spacedim", 0, MAX_INDEX)
             if d != 3:
-                raise self.error("spacedim", f"= {d}: only 3-D friction problems are supported")
+                raise self.error("spacedim", f"{d}: only 3-D friction problems are supported")
 
     def info(self) -> dict:
         out = {}
@@ -248,8 +252,9 @@ class _Group:
         for key in ("title", "description", "math_info"):
             if g.has(key):
                 ds = g._get(key, "dataset")
-                try:
-                    v = ds[()] if ds.size is not None and ds.size <= 1 else ds[:1][0]
+                try:  # a string, or the first entry of anything else (never a whole big dataset)
+                    v = ds[()] if not ds.shape else ds[:1]
+                    v = v[0] if isinstance(v, np.ndarray) and v.size else v
                 except Exception as exc:
                     raise g.error(key, f"unreadable ({exc})") from None
                 v = v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
@@ -342,7 +347,7 @@ def _load_hdf5(path: str):
             nc = len(mu)
             if len(q) != 3 * nc:
                 raise vec.error("q", f"has {len(q)} entries, 3 x {nc} contacts (mu) = {3 * nc} expected")
-            _check_dense_size(path, g.field("W"), 3 * nc, 3 * nc, "W")
+            _check_dense_size(path, vec.field("mu"), 3 * nc, 3 * nc, f"W ({nc} contacts)")
             W = g.group("W").sparse((3 * nc, 3 * nc), f"q and mu ({nc} contacts)").toarray()
             kind, info = "fclib_local", g.info()
             if root.has("guesses"):
@@ -364,8 +369,8 @@ def _load_hdf5(path: str):
             w = vec.vector("w") if vec.has("w") else np.zeros(3 * nc)
             if len(w) != 3 * nc:
                 raise vec.error("w", f"has {len(w)} entries, 3 x {nc} contacts (mu) = {3 * nc} expected")
-            _check_dense_size(path, g.field("H"), ndof, 3 * nc, "M^-1 H")
-            _check_dense_size(path, g.field("W"), 3 * nc, 3 * nc, "W")
+            _check_dense_size(path, g.field("H"), ndof, 3 * nc, "M⁻¹H")
+            _check_dense_size(path, vec.field("mu"), 3 * nc, 3 * nc, f"W (Hᵀ M⁻¹ H, {nc} contacts)")
             M = g.group("M").sparse((ndof, ndof), f"f ({ndof} entries)")
             H = g.group("H").sparse((ndof, 3 * nc), f"f ({ndof} entries) and mu ({nc} contacts)")
             W, q, found = _condense_global(path, M, H, fv, w)
@@ -411,7 +416,7 @@ class _Tokens:
         bad = (out < lo) | (out > hi)
         if bad.any():
             j = _first_bad(bad)
-            raise self.error(name, f"= {out[j]}, outside [{lo}, {hi}]" + (f" (entry {j})" if k > 1 else ""))
+            raise self.error(name, f"{out[j]} is outside [{lo}, {hi}]" + (f" (entry {j})" if k > 1 else ""))
         return out
 
     def int(self, name: str, lo: int = 0, hi: int = MAX_INDEX) -> int:
@@ -477,12 +482,12 @@ def _load_dat(path: str):
         filled1 = tk.int("W/filled1", 0, bn0 + 1)
         filled2 = tk.int("W/filled2", 0, tk.left)
         if filled2 != nbblocks:
-            raise tk.error("W/filled2", f"= {filled2} blocks, nbblocks = {nbblocks}")
+            raise tk.error("W/filled2", f"{filled2} blocks, but nbblocks = {nbblocks}")
         row_ptr = tk.ints(filled1, "W/index1_data", 0, filled2)
         if filled1 and (row_ptr[0] != 0 or np.any(np.diff(row_ptr) < 0) or row_ptr[-1] != filled2):
             raise tk.error("W/index1_data", f"must increase from 0 to filled2 = {filled2}")
         if filled1 == 0 and filled2 != 0:
-            raise tk.error("W/filled1", f"= 0 but {filled2} blocks are declared")
+            raise tk.error("W/filled1", f"0 block rows but {filled2} blocks declared")
         col_idx = tk.ints(filled2, "W/index2_data", 0, max(bn1 - 1, 0))
         if filled2 and bn1 == 0:
             raise tk.error("W/index2_data", "blocks declared in a matrix of 0 block columns")
@@ -548,6 +553,12 @@ def load(path: str | os.PathLike) -> FclibProblem:
         raise FclibFormatError(path, "", f"inconsistent sizes (W {W.shape}, q {q.shape}, {nc} contacts)")
     for name, arr in (("W", W), ("q", q), ("mu", mu)):
         _check_finite(path, name, np.ravel(arr))
+    d = np.diagonal(W)
+    if (d < 0).any():  # FCLib's W (and M) are positive (semi-)definite
+        k = _first_bad(d < 0)
+        where = {"fclib_local": "fclib_local/W", "fclib_global": "fclib_global/M"}.get(kind, "W")
+        raise FclibFormatError(path, where, f"W[{k},{k}] = {d[k]:.3g} is negative: W is not positive "
+                                            "semi-definite as FCLib requires")
     p = _to_stiction_order(nc)
     A = np.asfortranarray(W[np.ix_(p, p)])
     b = -q[p]
@@ -575,6 +586,18 @@ def write_local(path: str | os.PathLike, problem: ContactProblem, title: str = "
     W = sp.csr_matrix(problem.A[np.ix_(inv, inv)])
     q = -problem.b[inv]
     mu = np.array([c.mu for c in cons])
+    if nc == 0:
+        raise ValueError("FCLib local problems need at least one contact")
+    # write only what load() accepts back
+    if not (np.all(np.isfinite(W.data)) and np.all(np.isfinite(q)) and np.all(np.isfinite(mu))):
+        raise ValueError("the problem holds non-finite values; FCLib files must not")
+    if W.nnz > MAX_INDEX:
+        raise ValueError(f"W has {W.nnz} nonzeros, more than FCLib's 32-bit indices can hold")
+    lam = None
+    if solution is not None:
+        lam = np.asarray(solution, dtype=np.float64)
+        if lam.shape != (3 * nc,) or not np.all(np.isfinite(lam)):
+            raise ValueError(f"solution must be {3 * nc} finite values (shape {lam.shape} given)")
     with h5py.File(os.fspath(path), "w") as f:
         g = f.create_group("fclib_local")
         g.create_dataset("spacedim", data=np.array([3], dtype=np.int32))
@@ -591,9 +614,8 @@ def write_local(path: str | os.PathLike, problem: ContactProblem, title: str = "
         ig.create_dataset("title", data=np.bytes_(title or "stiction"))
         ig.create_dataset("description", data=np.bytes_(description or "written by stiction.fclib.write_local"))
         ig.create_dataset("math_info", data=np.bytes_("u = W r + q, contact rows (n, t1, t2)"))
-        if solution is not None:
+        if lam is not None:
             sg = f.create_group("solution")
-            lam = np.asarray(solution, dtype=np.float64)
             sg.create_dataset("r", data=lam[inv])
             u = problem.A @ lam - problem.b
             sg.create_dataset("u", data=u[inv])
