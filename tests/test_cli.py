@@ -152,3 +152,14 @@ def test_scene_file_cli_roundtrip(capsys, tmp_path):
     assert rc == 0, err
     s = json.loads(out)
     assert s["scene"] == "mine" and s["steps"] == 50 and s["base_drift"] < 1e-9
+
+
+def test_coarse_step_penetration_is_warned_about(capsys):
+    """ball-on-table at dt = 50 ms: the ball lands 4.7 cm inside the table for one step (then rests
+    exactly on it); the run succeeds but says so."""
+    rc, out, err = run(capsys, "simulate", "ball-on-table", "--dt", "0.05", "--json")
+    assert rc == 0
+    s = json.loads(out)
+    assert s["max_penetration"] == pytest.approx(0.04715, abs=1e-4)
+    assert len(s["warnings"]) == 1 and "too coarse" in s["warnings"][0]
+    assert_one_line(err, "warning: max penetration 0.0472 m exceeds 0.001 m")

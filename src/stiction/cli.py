@@ -212,6 +212,9 @@ def cmd_simulate(args) -> int:
     else:
         for key, val in summary.items():
             print(f"{key:38s} {val}")
+    for warning in summary["warnings"]:
+        if summary["all_converged"] or "did not solve" not in warning:
+            print(f"stiction simulate: warning: {warning}", file=sys.stderr)
     if not summary["all_converged"]:
         print(f"stiction simulate: {summary['unconverged_steps']} of {summary['steps']} steps did not solve the "
               f"contact problem to the tolerance (first at t = {summary['first_unconverged_t']:.6g} s; largest "

@@ -322,7 +322,7 @@ class Simulator:
                 disp = centers[after][:, sphere_closed, :2] - centers[i0][sphere_closed, :2]
                 displacement = float(np.linalg.norm(disp, axis=-1).max())
         tim = np.median(traj.timings[1:], axis=0) if len(traj.t) > 1 else np.zeros(5)
-        return {
+        out = {
             "scene": sc.name,
             "mode": {0: "timestep", 1: "rk4", 2: "adaptive"}[int(self.settings.mode)],
             "dt": self.settings.dt,
@@ -346,6 +346,8 @@ class Simulator:
             "max_foot_slip": slip,
             "max_foot_displacement": displacement,
         }
+        out["warnings"] = _warnings(out)
+        return out
 
 
 def _vector(name: str, x, n: int) -> np.ndarray:
@@ -382,6 +384,21 @@ def _with_friction(scene: Scene, mu: float) -> Scene:
     contacts = [copy_contact(c, _core.SphereContact, sphere_fields) for c in scene.contacts]
     pairs = [copy_contact(p, _core.GeometryPairContact, ("name", "pair", "max_contacts")) for p in scene.pairs]
     return dataclasses.replace(scene, contacts=contacts, pairs=pairs, mu=mu)
+
+
+PENETRATION_WARNING = 1e-3  # m
+
+
+def _warnings(summary: dict) -> list[str]:
+    """What a reader of the summary should not miss (also printed by `stiction simulate`)."""
+    out = []
+    if summary["max_penetration"] > PENETRATION_WARNING:
+        out.append(f"max penetration {summary['max_penetration']:.3g} m exceeds {PENETRATION_WARNING:g} m: the step "
+                   f"dt = {summary['dt']:g} s is too coarse for the impact speeds (contacts are detected once per step)")
+    if not summary["all_converged"]:
+        out.append(f"{summary['unconverged_steps']} of {summary['steps']} steps did not solve the contact problem "
+                   f"to the tolerance (first at t = {summary['first_unconverged_t']:.6g} s)")
+    return out
 
 
 def sliding_acceleration(scene: Scene) -> float:
