@@ -55,6 +55,9 @@ def test_random_problems_solve_to_1e_10(mix, rank, solver):
             failures.append((seed, r.residual, r.message))
             continue
         assert r.residual <= 1e-10
+        # the verdict: the residual plus its rounding bound is within the tolerance
+        assert r.status == stiction.SolveStatus.converged
+        assert r.relative_residual + r.residual_bound <= 1e-10 and r.residual_bound < 1e-12
         check_ncp(p, r.lam, 1e-7)
     # ADMM is first-order: allow it one slow draw in eight, never the others.
     assert len(failures) <= (1 if solver == "admm" else 0), failures

@@ -12,7 +12,22 @@ def solve1(A, b, constraint, solver="default", tol=1e-13):
     p = ContactProblem(np.asfortranarray(A, dtype=float), np.asarray(b, dtype=float), [constraint])
     r = stiction.solve(p, solver=solver, tol=tol, max_iter=5000)
     assert r.converged, (solver, r.residual, r.message)
+    assert r.relative_residual + r.residual_bound <= tol  # what converged means (verdict.hpp)
+    assert [s.name for s in r.stages][-1:] and r.stages[0].iterations >= 0
     return r
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_sticking_block_with_a_huge_lambda_does_not_read_zero(solver):
+    """lambda = 1e12 sticking, velocity error 1e-4: evaluated as lambda - P(lambda - w) the
+    residual rounds to 0 (w is below lambda's rounding step); the verdict sees w."""
+    A = np.diag([1e-12, 1e-12, 1e-12])
+    lam = np.array([0.0, 0.0, 1e12])
+    b = A @ lam + np.array([0.0, 0.0, 1e-4])  # u_n = -1e-4 at lam: not a solution
+    p = ContactProblem(A, b, [Constraint.spatial_friction(0.5)])
+    r = stiction.solve(p, solver=solver, warm_start=lam, max_iter=0)
+    assert r.relative_residual == pytest.approx(1e-4 / np.linalg.norm(b), rel=1e-6)
+    assert not r.converged
 
 
 @pytest.mark.parametrize("solver", SOLVERS)

@@ -11,11 +11,14 @@ from ._core import (  # noqa: F401
     ConstraintKind,
     ContactProblem,
     ContactState,
+    SolveStatus,
     Solver,
     SolverResult,
     SolverSettings,
+    StageReport,
     WarmStart,
     residual,
+    rk4_stable_step,
     solver_names,
 )
 from .solve import solve, spatial_problem  # noqa: F401

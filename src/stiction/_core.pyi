@@ -6,7 +6,7 @@ import numpy
 class Constraint:
     """One block of rows. Build with Constraint.bilateral(k), Constraint.unilateral(), Constraint.planar_friction(mu), Constraint.spatial_friction(mu). Normal row last."""
     @staticmethod
-    def bilateral(rows: int) -> Constraint: ...
+    def bilateral(rows: Any) -> Constraint: ...
     @property
     def kind(self) -> ConstraintKind: ...
 
@@ -14,12 +14,12 @@ class Constraint:
     def mu(self) -> float: ...
 
     @staticmethod
-    def planar_friction(mu: float) -> Constraint: ...
+    def planar_friction(mu: Any) -> Constraint: ...
     @property
     def size(self) -> int: ...
 
     @staticmethod
-    def spatial_friction(mu: float) -> Constraint: ...
+    def spatial_friction(mu: Any) -> Constraint: ...
     @staticmethod
     def unilateral() -> Constraint: ...
 
@@ -32,11 +32,11 @@ class ConstraintKind(int):
     values: ClassVar[dict[int, ConstraintKind]]
 
 class ContactProblem:
-    """A lambda - b in -lim N_C^{U_eps}(lambda) (eq. 65): Delassus operator A, right-hand side b, and the list of constraint blocks. Raises ValueError on inconsistent input."""
+    """A lambda - b in -lim N_C^{U_eps}(lambda) (eq. 65): Delassus operator A, right-hand side b, and the list of constraint blocks. Raises ValueError on inconsistent input (sizes, NaN, mu < 0, an asymmetric or indefinite A) and TypeError on the wrong kind of argument."""
     @property
     def A(self) -> numpy.ndarray: ...
 
-    def __init__(self, A: numpy.ndarray, b: numpy.ndarray, constraints: Any, asymmetry_tolerance: float = ...) -> None: ...
+    def __init__(self, A: Any = ..., b: Any = ..., constraints: Any = ..., asymmetry_tolerance: Any = ...) -> None: ...
     @property
     def asymmetry(self) -> float: ...
 
@@ -55,7 +55,7 @@ class ContactProblem:
     @property
     def offsets(self) -> list: ...
 
-    def set_b(self, b: numpy.ndarray) -> None: ...
+    def set_b(self, b: Any) -> None: ...
 
 class ContactState(int):
     closed: ClassVar[ContactState]
@@ -115,7 +115,7 @@ class SimulatorData:
     @property
     def M(self) -> numpy.ndarray: ...
 
-    def __init__(self, arg2: SimulatorModel) -> None: ...
+    def __init__(self, sim: Any = ...) -> None: ...
     @property
     def active(self) -> list: ...
 
@@ -181,7 +181,7 @@ class SimulatorData:
 
 class SimulatorModel:
     """Immutable description: pinocchio.Model, half-spaces, contacts, anchors, settings."""
-    def __init__(self, model: Any, halfspaces: Any, contacts: Any, anchors: Any, settings: SimulatorSettings, geometry: Any = ..., pairs: Any = ...) -> None: ...
+    def __init__(self, model: Any = ..., halfspaces: Any = ..., contacts: Any = ..., anchors: Any = ..., settings: Any = ..., geometry: Any = ..., pairs: Any = ...) -> None: ...
     @property
     def contacts(self) -> list: ...
 
@@ -218,17 +218,26 @@ class SimulatorSettings:
     mode: IntegrationMode
     ode_tolerance: float
     solver: str
+    time_limit: float
     tolerance: float
     warm_start: bool
     zeta: float
 
+class SolveStatus(int):
+    converged: ClassVar[SolveStatus]
+    infeasible: ClassVar[SolveStatus]
+    not_converged: ClassVar[SolveStatus]
+    unresolvable: ClassVar[SolveStatus]
+    names: ClassVar[dict[str, SolveStatus]]
+    values: ClassVar[dict[int, SolveStatus]]
+
 class Solver:
     """One algorithm with its reusable workspace: 'default', 'nsgs', 'admm' or 'newton'."""
-    def __init__(self, name: str) -> None: ...
+    def __init__(self, name: Any) -> None: ...
     @property
     def name(self) -> str: ...
 
-    def solve(self, problem: ContactProblem, settings: SolverSettings, guess: Any = ...) -> SolverResult: ...
+    def solve(self, problem: Any, settings: Any, guess: Any = ...) -> SolverResult: ...
 
 class SolverResult:
     """Outcome of a solve; every solver reports the same residual."""
@@ -237,13 +246,25 @@ class SolverResult:
     def converged(self) -> bool: ...
 
     @property
+    def implicated_blocks(self) -> list: ...
+
+    @property
     def iterations(self) -> int: ...
 
     @property
     def lam(self) -> numpy.ndarray: ...
 
     @property
+    def lambda_norm(self) -> float: ...
+
+    @property
     def message(self) -> str: ...
+
+    @property
+    def min_solution_norm(self) -> float: ...
+
+    @property
+    def precision_floor(self) -> float: ...
 
     @property
     def relative_residual(self) -> float: ...
@@ -252,13 +273,22 @@ class SolverResult:
     def residual(self) -> float: ...
 
     @property
+    def residual_bound(self) -> float: ...
+
+    @property
     def seconds(self) -> float: ...
 
     @property
     def solver(self) -> str: ...
 
     @property
+    def stages(self) -> list: ...
+
+    @property
     def states(self) -> list: ...
+
+    @property
+    def status(self) -> SolveStatus: ...
 
     @property
     def u(self) -> numpy.ndarray: ...
@@ -271,11 +301,12 @@ class SolverResult:
 
 
 class SolverSettings:
-    """Stopping rules and warm start of a solve."""
+    """Stopping rules, budgets and warm start of a solve."""
     def __init__(self) -> None: ...
     admm_rho: float
     max_iterations: int
     proxqp_facets: int
+    proxqp_max_iterations: int
     proxqp_tolerance: float
     time_limit: float
     tolerance: float
@@ -292,6 +323,21 @@ class SphereContact:
     planar: bool
     radius: float
 
+class StageReport:
+    """One stage of a solve: its name, iterations, seconds and outcome."""
+    @property
+    def iterations(self) -> int: ...
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def outcome(self) -> str: ...
+
+    @property
+    def seconds(self) -> float: ...
+
+
 class WarmStart(int):
     given: ClassVar[WarmStart]
     none: ClassVar[WarmStart]
@@ -299,17 +345,20 @@ class WarmStart(int):
     names: ClassVar[dict[str, WarmStart]]
     values: ClassVar[dict[int, WarmStart]]
 
-def build_contact_problem(sim: SimulatorModel, data: SimulatorData, q: numpy.ndarray, v: numpy.ndarray, delta: float, zeta: float) -> None:
+def build_contact_problem(sim: Any, data: Any, q: Any, v: Any, delta: Any, zeta: Any) -> None:
     """fill data.J, A, b (eq. 27), drift, position_error and active at (q, v)"""
 
-def residual(problem: ContactProblem, lam: numpy.ndarray) -> float:
+def residual(problem: Any, lam: Any) -> float:
     """natural-map residual of the De Saxce problem / (1 + ||b||)"""
 
-def rollout(sim: SimulatorModel, data: SimulatorData, n_steps: int, record_every: int = ...) -> dict:
+def rk4_stable_step(delta: Any, zeta: Any = ...) -> float:
+    """the largest dt SimulatorModel accepts in rk4 mode: 0.75 x RK4's stability limit on eq. 64"""
+
+def rollout(sim: Any, data: Any, n_steps: Any, record_every: Any = ...) -> dict:
     """n steps in C++; returns a dict of arrays (t, q, v, lam, gaps, states, residual, ...)"""
 
 def solver_names() -> list:
     ...
 
-def step(sim: SimulatorModel, data: SimulatorData) -> None:
+def step(sim: Any, data: Any) -> None:
     """advance one step"""

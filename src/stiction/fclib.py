@@ -60,12 +60,17 @@ class FclibProblem:
             scale = np.abs(self.A).max() if self.A.size else 0.0
             asym = np.abs(self.A - self.A.T).max() / scale if scale > 0 else 0.0
             asymmetry_tolerance = max(1e-9, 1.01 * asym)
-        return ContactProblem(
-            np.asfortranarray(self.A),
-            np.ascontiguousarray(self.b),
-            [Constraint.spatial_friction(float(m)) for m in self.mu],
-            asymmetry_tolerance,
-        )
+        try:
+            return ContactProblem(
+                np.asfortranarray(self.A),
+                np.ascontiguousarray(self.b),
+                [Constraint.spatial_friction(float(m)) for m in self.mu],
+                asymmetry_tolerance,
+            )
+        except ValueError as exc:  # e.g. an indefinite W: the file's data is not a contact problem
+            field = "W (condensed from M, H)" if self.kind == "fclib_global" else "W"
+            raise FclibFormatError(self.info.get("path", self.name), field,
+                                   str(exc).removeprefix("ContactProblem: ")) from None
 
 
 def _to_stiction_order(nc: int) -> np.ndarray:
@@ -564,6 +569,7 @@ def load(path: str | os.PathLike) -> FclibProblem:
     b = -q[p]
     if guess is not None:
         guess = guess[p]
+    info.setdefault("path", str(path))
     return FclibProblem(os.path.basename(path), kind, A, b, mu, guess, info)
 
 

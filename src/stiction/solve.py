@@ -1,23 +1,57 @@
 """Convenience entry points around the compiled solvers."""
 from __future__ import annotations
 
+import math
+import numbers
 from typing import Sequence
 
 import numpy as np
 
-from ._core import Constraint, ContactProblem, Solver, SolverResult, SolverSettings, WarmStart
+from ._core import Constraint, ContactProblem, Solver, SolverResult, SolverSettings, WarmStart, solver_names
 
 _solvers: dict[str, Solver] = {}
 
 
+def _type_name(x) -> str:
+    if isinstance(x, np.ndarray):
+        return f"{x.dtype} ndarray of shape {x.shape}"
+    return type(x).__name__
+
+
 def _as_float_array(x, name: str, ndim: int) -> np.ndarray:
+    """x as a float64 array of `ndim` dimensions: TypeError for None, str, complex or
+    non-numeric entries, ValueError for the wrong number of dimensions."""
+    if x is None or isinstance(x, (str, bytes)):
+        raise TypeError(f"{name} must be a {ndim}-D array of floats, got {_type_name(x)}")
     try:
-        a = np.asarray(x, dtype=np.float64)
+        a = np.asarray(x)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric: {exc}") from None
+        raise TypeError(f"{name} must be a {ndim}-D array of floats: {exc}") from None
+    if np.iscomplexobj(a):
+        raise TypeError(f"{name} must be real, got a complex array")
+    if a.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must be numeric, got {_type_name(x)} (dtype {a.dtype})")
     if a.ndim != ndim:
         raise ValueError(f"{name} must be {ndim}-D, got shape {a.shape}")
+    a = a.astype(np.float64, copy=False)
     return np.ascontiguousarray(a) if ndim == 1 else np.asfortranarray(a)
+
+
+def _real(x, name: str) -> float:
+    """A real number: int, float or a numpy real scalar; not bool, None, str or complex."""
+    if not isinstance(x, (bool, np.bool_)):
+        if isinstance(x, (numbers.Real, np.floating, np.integer)):
+            return float(x)
+        if isinstance(x, np.ndarray) and x.ndim == 0 and x.dtype.kind in "iuf":
+            return float(x)
+    raise TypeError(f"{name} must be a real number, got {_type_name(x)}")
+
+
+def _integer(x, name: str) -> int:
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (numbers.Integral, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {_type_name(x)}"
+                        + (f" {x!r}" if isinstance(x, float) else ""))
+    return int(x)
 
 
 def spatial_problem(A, b, mu: float | Sequence[float], asymmetry_tolerance: float = 1e-9) -> ContactProblem:
@@ -27,7 +61,13 @@ def spatial_problem(A, b, mu: float | Sequence[float], asymmetry_tolerance: floa
     if A.shape[0] % 3:
         raise ValueError(f"A has {A.shape[0]} rows, not a multiple of 3 (spatial contacts)")
     nc = A.shape[0] // 3
-    mus = np.broadcast_to(np.asarray(mu, dtype=np.float64), (nc,))
+    mus = np.asarray(mu)
+    if np.iscomplexobj(mus) or mus.dtype.kind not in "biuf":
+        raise TypeError(f"mu must be a real number or one per contact, got {_type_name(mu)}")
+    try:
+        mus = np.broadcast_to(mus.astype(np.float64), (nc,))
+    except ValueError:
+        raise ValueError(f"mu must be one number or {nc} (one per contact), got shape {mus.shape}") from None
     return ContactProblem(A, b, [Constraint.spatial_friction(float(m)) for m in mus], asymmetry_tolerance)
 
 
@@ -41,23 +81,45 @@ def solve(
 ) -> SolverResult:
     """Solve A lambda - b in -lim N_C^{U_eps}(lambda) (eq. 65).
 
+    tol: on the relative natural map plus its rounding bound (result.converged means the
+    exact natural map at result.lam is within tol * ||b||; docs/solvers.md).
     warm_start: None (lambda = 0), "proxqp" (facetized-cone QP by ProxQP), or an
     array lambda_0 (e.g. the previous step's solution).
+    time_limit: seconds for the whole solve, every stage included (0: none).
     The solver objects (and their workspaces) are reused across calls.
+    Wrong kinds of argument raise TypeError, wrong values ValueError, naming the argument.
     """
+    if not isinstance(problem, ContactProblem):
+        raise TypeError(f"solve: problem must be a stiction.ContactProblem, got {_type_name(problem)}")
+    if not isinstance(solver, str):
+        raise TypeError(f"solve: solver must be a name (str), got {_type_name(solver)}")
+    if solver not in solver_names():
+        raise ValueError(f"unknown solver '{solver}' (known: {', '.join(solver_names())})")
+    tol = _real(tol, "solve: tol")
+    if not (tol > 0 and math.isfinite(tol)):
+        raise ValueError(f"solve: tol (the tolerance) must be a positive finite number, got {tol}")
+    max_iter = _integer(max_iter, "solve: max_iter")
+    if max_iter < 0:
+        raise ValueError(f"solve: max_iter must be >= 0, got {max_iter}")
+    time_limit = _real(time_limit, "solve: time_limit")
+    if not (time_limit >= 0 and math.isfinite(time_limit)):
+        raise ValueError(f"solve: time_limit must be a finite number of seconds >= 0 (0: none), got {time_limit}")
     settings = SolverSettings()
-    settings.tolerance = float(tol)
-    settings.max_iterations = int(max_iter)
-    settings.time_limit = float(time_limit)
+    settings.tolerance = tol
+    settings.max_iterations = max_iter
+    settings.time_limit = time_limit
     guess = None
     if warm_start is None:
         settings.warm_start = WarmStart.none
     elif isinstance(warm_start, str):
         if warm_start != "proxqp":
-            raise ValueError(f"warm_start must be None, 'proxqp' or an array, got {warm_start!r}")
+            raise ValueError(f"solve: warm_start must be None, 'proxqp' or an array, got {warm_start!r}")
         settings.warm_start = WarmStart.proxqp
     else:
-        guess = _as_float_array(warm_start, "warm_start", 1)
+        guess = _as_float_array(warm_start, "solve: warm_start (initial lambda)", 1)
+        if guess.shape[0] != problem.num_rows:
+            raise ValueError(f"solve: warm_start: initial lambda has {guess.shape[0]} entries, "
+                             f"the problem has {problem.num_rows} rows")
         settings.warm_start = WarmStart.given
     if solver not in _solvers:
         _solvers[solver] = Solver(solver)

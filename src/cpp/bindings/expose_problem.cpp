@@ -1,6 +1,7 @@
 #include <boost/python.hpp>
 #include <eigenpy/eigenpy.hpp>
 
+#include "convert.hpp"
 #include "expose.hpp"
 #include "stiction/contact_problem.hpp"
 
@@ -11,25 +12,23 @@ namespace python {
 
 namespace {
 
-std::vector<Constraint> toConstraints(const bp::object& seq) {
-  std::vector<Constraint> out;
-  const long n = bp::len(seq);
-  out.reserve(n);
-  for (long i = 0; i < n; ++i) {
-    bp::extract<Constraint> c(seq[i]);
-    if (!c.check())
-      throw std::invalid_argument("ContactProblem: constraints[" + std::to_string(i) +
-                                  "] is not a stiction.Constraint");
-    out.push_back(c());
-  }
-  return out;
+std::shared_ptr<ContactProblem> makeProblem(const bp::object& A, const bp::object& b, const bp::object& constraints,
+                                            const bp::object& asymmetry_tolerance) {
+  if (constraints.is_none()) raiseTypeError("ContactProblem: constraints is required (a list of stiction.Constraint)");
+  Eigen::MatrixXd a = toMatrix(A, "ContactProblem: A");
+  Eigen::VectorXd bv = toVector(b, "ContactProblem: b");
+  std::vector<Constraint> cons = toList<Constraint>(constraints, "ContactProblem: constraints", "stiction.Constraint");
+  const double tol = toDouble(asymmetry_tolerance, "ContactProblem: asymmetry_tolerance");
+  if (!(tol >= 0.0)) throw std::invalid_argument("ContactProblem: asymmetry_tolerance must be >= 0");
+  return std::make_shared<ContactProblem>(std::make_shared<DenseDelassus>(std::move(a)), std::move(bv),
+                                          std::move(cons), tol);
 }
 
-std::shared_ptr<ContactProblem> makeProblem(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
-                                            const bp::object& constraints, double asymmetry_tolerance) {
-  return std::make_shared<ContactProblem>(std::make_shared<DenseDelassus>(A), b,
-                                          toConstraints(constraints), asymmetry_tolerance);
+Constraint bilateral(const bp::object& rows) {
+  return Constraint::bilateral(fromPython<int>(rows, "Constraint.bilateral: rows"));
 }
+Constraint planar(const bp::object& mu) { return Constraint::planarFriction(toDouble(mu, "Constraint.planar_friction: mu")); }
+Constraint spatial(const bp::object& mu) { return Constraint::spatialFriction(toDouble(mu, "Constraint.spatial_friction: mu")); }
 
 bp::list constraintsOf(const ContactProblem& p) {
   bp::list out;
@@ -45,11 +44,15 @@ bp::list offsetsOf(const ContactProblem& p) {
 
 Eigen::MatrixXd denseA(const ContactProblem& p) { return p.delassus().dense(); }
 Eigen::VectorXd bOf(const ContactProblem& p) { return p.b(); }
-void setB(ContactProblem& p, const Eigen::VectorXd& b) { p.setB(b); }
+void setB(ContactProblem& p, const bp::object& b) {
+  p.setB(toVector(b, "ContactProblem.set_b: b", p.numRows()));
+}
 
 std::string constraintRepr(const Constraint& c) { return "stiction.Constraint." + c.describe(); }
-bool constraintEq(const Constraint& a, const Constraint& b) {
-  return a.kind == b.kind && a.size == b.size && a.mu == b.mu;
+bool constraintEq(const Constraint& a, const bp::object& other) {
+  bp::extract<const Constraint&> b(other);
+  if (!b.check()) return false;
+  return a.kind == b().kind && a.size == b().size && a.mu == b().mu;
 }
 
 }  // namespace
@@ -71,14 +74,14 @@ void exposeProblem() {
                          "Constraint.unilateral(), Constraint.planar_friction(mu), "
                          "Constraint.spatial_friction(mu). Normal row last.",
                          bp::no_init)
-      .def("bilateral", &Constraint::bilateral, bp::arg("rows"), "k equality rows (C = R^k)")
+      .def("bilateral", &bilateral, bp::arg("rows"), "k equality rows (C = R^k)")
       .staticmethod("bilateral")
       .def("unilateral", &Constraint::unilateral, "1 row, lambda_n >= 0")
       .staticmethod("unilateral")
-      .def("planar_friction", &Constraint::planarFriction, bp::arg("mu"),
+      .def("planar_friction", &planar, bp::arg("mu"),
            "2 rows (t, n), |lambda_t| <= mu lambda_n")
       .staticmethod("planar_friction")
-      .def("spatial_friction", &Constraint::spatialFriction, bp::arg("mu"),
+      .def("spatial_friction", &spatial, bp::arg("mu"),
            "3 rows (t1, t2, n), ||lambda_t|| <= mu lambda_n")
       .staticmethod("spatial_friction")
       .def_readonly("kind", &Constraint::kind)
@@ -90,12 +93,13 @@ void exposeProblem() {
   bp::class_<ContactProblem, std::shared_ptr<ContactProblem>>(
       "ContactProblem",
       "A lambda - b in -lim N_C^{U_eps}(lambda) (eq. 65): Delassus operator A, right-hand "
-      "side b, and the list of constraint blocks. Raises ValueError on inconsistent input.",
+      "side b, and the list of constraint blocks. Raises ValueError on inconsistent input "
+      "(sizes, NaN, mu < 0, an asymmetric or indefinite A) and TypeError on the wrong kind of argument.",
       bp::no_init)
       .def("__init__",
            bp::make_constructor(&makeProblem, bp::default_call_policies(),
-                                (bp::arg("A"), bp::arg("b"), bp::arg("constraints"),
-                                 bp::arg("asymmetry_tolerance") = 1e-9)))
+                                (bp::arg("A") = bp::object(), bp::arg("b") = bp::object(),
+                                 bp::arg("constraints") = bp::object(), bp::arg("asymmetry_tolerance") = 1e-9)))
       .add_property("A", &denseA, "dense copy of the Delassus operator")
       .add_property("b", &bOf)
       .add_property("constraints", &constraintsOf)

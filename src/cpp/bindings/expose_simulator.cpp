@@ -3,7 +3,11 @@
 #include <boost/python.hpp>
 #include <eigenpy/eigenpy.hpp>
 
+#include <cmath>
+
+#include "convert.hpp"
 #include "expose.hpp"
+#include "stiction/rk4_stability.hpp"
 #include "stiction/simulator.hpp"
 
 namespace bp = boost::python;
@@ -11,72 +15,76 @@ namespace bp = boost::python;
 namespace stiction {
 namespace python {
 
+template <>
+IntegrationMode fromPython<IntegrationMode>(const bp::object& x, const std::string& name) {
+  return toEnum<IntegrationMode>(x, name, "stiction.IntegrationMode");
+}
+
 namespace {
 
-template <typename T>
-std::vector<T> listOf(const bp::object& seq, const char* what) {
-  std::vector<T> out;
-  const long n = bp::len(seq);
-  for (long i = 0; i < n; ++i) {
-    bp::extract<T> e(seq[i]);
-    if (!e.check()) throw std::invalid_argument(std::string(what) + "[" + std::to_string(i) + "] has the wrong type");
-    out.push_back(e());
-  }
-  return out;
+const pinocchio::Model& toModel(const bp::object& model) {
+  return toObject<pinocchio::Model>(model, "SimulatorModel: model", "pinocchio.Model");
 }
 
-std::shared_ptr<SimulatorModel> makeSimulatorModel(const pinocchio::Model& model, const bp::object& halfspaces,
+std::shared_ptr<SimulatorModel> makeSimulatorModel(const bp::object& model, const bp::object& halfspaces,
                                                    const bp::object& contacts, const bp::object& anchors,
-                                                   const SimulatorSettings& settings, const bp::object& geometry,
+                                                   const bp::object& settings, const bp::object& geometry,
                                                    const bp::object& pairs) {
-  std::vector<GeometryPairContact> pair_list = listOf<GeometryPairContact>(pairs, "pairs");
+  const pinocchio::Model& m = toModel(model);
+  auto hs = toList<HalfSpace>(halfspaces, "SimulatorModel: halfspaces", "stiction.HalfSpace");
+  auto cs = toList<SphereContact>(contacts, "SimulatorModel: contacts", "stiction.SphereContact");
+  auto as = toList<PointAnchor>(anchors, "SimulatorModel: anchors", "stiction.PointAnchor");
+  const SimulatorSettings& s = toObject<SimulatorSettings>(settings, "SimulatorModel: settings",
+                                                           "stiction.SimulatorSettings");
+  auto pair_list = toList<GeometryPairContact>(pairs, "SimulatorModel: pairs", "stiction.GeometryPairContact");
   if (geometry.is_none()) {
-    if (!pair_list.empty()) throw std::invalid_argument("pairs need a geometry model");
-    return std::make_shared<SimulatorModel>(model, listOf<HalfSpace>(halfspaces, "halfspaces"),
-                                            listOf<SphereContact>(contacts, "contacts"),
-                                            listOf<PointAnchor>(anchors, "anchors"), settings);
+    if (!pair_list.empty()) throw std::invalid_argument("SimulatorModel: pairs need a geometry model");
+    return std::make_shared<SimulatorModel>(m, std::move(hs), std::move(cs), std::move(as), s);
   }
-  bp::extract<const pinocchio::GeometryModel&> g(geometry);
-  if (!g.check()) throw std::invalid_argument("geometry must be a pinocchio.GeometryModel");
-  return std::make_shared<SimulatorModel>(model, listOf<HalfSpace>(halfspaces, "halfspaces"),
-                                          listOf<SphereContact>(contacts, "contacts"),
-                                          listOf<PointAnchor>(anchors, "anchors"), settings, g(), pair_list);
+  const auto& g = toObject<pinocchio::GeometryModel>(geometry, "SimulatorModel: geometry", "pinocchio.GeometryModel");
+  return std::make_shared<SimulatorModel>(m, std::move(hs), std::move(cs), std::move(as), s, g, pair_list);
 }
 
-std::shared_ptr<SimulatorData> makeSimulatorData(const SimulatorModel& sim) {
-  return std::make_shared<SimulatorData>(sim);
+std::shared_ptr<SimulatorData> makeSimulatorData(const bp::object& sim) {
+  return std::make_shared<SimulatorData>(toObject<SimulatorModel>(sim, "SimulatorData: sim", "stiction.SimulatorModel"));
 }
 
 // Eigen members as numpy copies (get) and checked assignments (set).
-#define STICTION_VECTOR_PROPERTY(Owner, member)                                         \
-  Eigen::VectorXd get_##member(const Owner& o) { return o.member; }                    \
-  void set_##member(Owner& o, const Eigen::VectorXd& x) {                              \
-    if (x.size() != o.member.size())                                                   \
-      throw std::invalid_argument(#member " needs " + std::to_string(o.member.size()) + \
-                                  " entries, got " + std::to_string(x.size()));        \
-    if (!x.allFinite()) throw std::invalid_argument(#member " has NaN or infinite entries"); \
-    o.member = x;                                                                      \
-  }
-
-STICTION_VECTOR_PROPERTY(SimulatorData, q)
-STICTION_VECTOR_PROPERTY(SimulatorData, v)
+// Eigen members as numpy copies (get) and checked assignments (set): a list of
+// floats is accepted, None / str / complex raise TypeError, a wrong size ValueError.
+void setChecked(Eigen::VectorXd& dst, const bp::object& x, const char* name) {
+  Eigen::VectorXd v = toVector(x, std::string("SimulatorData.") + name, dst.size());
+  if (!v.allFinite()) throw std::invalid_argument(std::string("SimulatorData.") + name + " has NaN or infinite entries");
+  dst = std::move(v);
+}
+Eigen::VectorXd get_q(const SimulatorData& d) { return d.q; }
+Eigen::VectorXd get_v(const SimulatorData& d) { return d.v; }
+// A new state starts a new trajectory: the blow-up check takes its reference again.
+void set_q(SimulatorData& d, const bp::object& x) {
+  setChecked(d.q, x, "q");
+  d.reference_speed = -1.0;
+}
+void set_v(SimulatorData& d, const bp::object& x) {
+  setChecked(d.v, x, "v");
+  d.reference_speed = -1.0;
+}
+double get_t(const SimulatorData& d) { return d.t; }
+void set_t(SimulatorData& d, const bp::object& x) {
+  const double t = toDouble(x, "SimulatorData.t");
+  if (!std::isfinite(t)) throw std::invalid_argument("SimulatorData.t must be finite");
+  d.t = t;
+  d.reference_speed = -1.0;
+}
 Eigen::VectorXd get_kp(const SimulatorData& d) { return d.control.kp; }
 Eigen::VectorXd get_kd(const SimulatorData& d) { return d.control.kd; }
 Eigen::VectorXd get_q_target(const SimulatorData& d) { return d.control.q_target; }
 Eigen::VectorXd get_v_target(const SimulatorData& d) { return d.control.v_target; }
 Eigen::VectorXd get_tau_ff(const SimulatorData& d) { return d.control.tau_ff; }
-void setControlVector(Eigen::VectorXd& dst, const Eigen::VectorXd& x, const char* name) {
-  if (x.size() != dst.size())
-    throw std::invalid_argument(std::string(name) + " needs " + std::to_string(dst.size()) + " entries, got " +
-                                std::to_string(x.size()));
-  if (!x.allFinite()) throw std::invalid_argument(std::string(name) + " has NaN or infinite entries");
-  dst = x;
-}
-void set_kp(SimulatorData& d, const Eigen::VectorXd& x) { setControlVector(d.control.kp, x, "kp"); }
-void set_kd(SimulatorData& d, const Eigen::VectorXd& x) { setControlVector(d.control.kd, x, "kd"); }
-void set_q_target(SimulatorData& d, const Eigen::VectorXd& x) { setControlVector(d.control.q_target, x, "q_target"); }
-void set_v_target(SimulatorData& d, const Eigen::VectorXd& x) { setControlVector(d.control.v_target, x, "v_target"); }
-void set_tau_ff(SimulatorData& d, const Eigen::VectorXd& x) { setControlVector(d.control.tau_ff, x, "tau_ff"); }
+void set_kp(SimulatorData& d, const bp::object& x) { setChecked(d.control.kp, x, "kp"); }
+void set_kd(SimulatorData& d, const bp::object& x) { setChecked(d.control.kd, x, "kd"); }
+void set_q_target(SimulatorData& d, const bp::object& x) { setChecked(d.control.q_target, x, "q_target"); }
+void set_v_target(SimulatorData& d, const bp::object& x) { setChecked(d.control.v_target, x, "v_target"); }
+void set_tau_ff(SimulatorData& d, const bp::object& x) { setChecked(d.control.tau_ff, x, "tau_ff"); }
 
 Eigen::MatrixXd get_J(const SimulatorData& d) { return d.J; }
 Eigen::MatrixXd get_A(const SimulatorData& d) { return d.A; }
@@ -115,18 +123,37 @@ bp::dict get_timings(const SimulatorData& d) {
   return out;
 }
 
-void doStep(const SimulatorModel& sim, SimulatorData& d) { step(sim, d); }
+const SimulatorModel& simArg(const bp::object& x, const char* fn) {
+  return toObject<SimulatorModel>(x, std::string(fn) + ": sim", "stiction.SimulatorModel");
+}
+SimulatorData& dataArg(const bp::object& x, const char* fn) {
+  return toObject<SimulatorData>(x, std::string(fn) + ": data", "stiction.SimulatorData");
+}
 
-void doBuild(const SimulatorModel& sim, SimulatorData& d, const Eigen::VectorXd& q, const Eigen::VectorXd& v,
-             double delta, double zeta) {
-  if (q.size() != sim.model.nq || v.size() != sim.model.nv)
-    throw std::invalid_argument("build_contact_problem: q needs nq entries and v nv entries");
+void doStep(const bp::object& sim, const bp::object& data) { step(simArg(sim, "step"), dataArg(data, "step")); }
+
+void doBuild(const bp::object& sim_, const bp::object& data, const bp::object& q_, const bp::object& v_,
+             const bp::object& delta_, const bp::object& zeta_) {
+  const SimulatorModel& sim = simArg(sim_, "build_contact_problem");
+  SimulatorData& d = dataArg(data, "build_contact_problem");
+  const Eigen::VectorXd q = toVector(q_, "build_contact_problem: q", sim.model.nq);
+  const Eigen::VectorXd v = toVector(v_, "build_contact_problem: v", sim.model.nv);
+  const double delta = toDouble(delta_, "build_contact_problem: delta");
+  const double zeta = toDouble(zeta_, "build_contact_problem: zeta");
   if (!(delta > 0.0) || !(zeta > 0.0)) throw std::invalid_argument("delta and zeta must be positive");
   buildContactProblem(sim, d, q, v, delta, zeta);
 }
 
+bp::dict rolloutImpl(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every);
+
+bp::dict rollout(const bp::object& sim, const bp::object& data, const bp::object& n_steps,
+                 const bp::object& every) {
+  return rolloutImpl(simArg(sim, "rollout"), dataArg(data, "rollout"), fromPython<int>(n_steps, "rollout: n_steps"),
+                     fromPython<int>(every, "rollout: record_every"));
+}
+
 /// Run n steps in C++, recording every `every`-th state (and the first).
-bp::dict rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every) {
+bp::dict rolloutImpl(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every) {
   if (n_steps < 0) throw std::invalid_argument("rollout: n_steps must be >= 0");
   if (every < 1) throw std::invalid_argument("rollout: record_every must be >= 1");
   const int records = n_steps / every + 1;
@@ -176,22 +203,6 @@ bp::dict rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int e
   return out;
 }
 
-Eigen::Vector3d getNormal(const HalfSpace& h) { return h.normal; }
-void setNormal(HalfSpace& h, const Eigen::Vector3d& n) { h.normal = n; }
-Eigen::Vector3d getT1(const HalfSpace& h) { return h.tangent1; }
-Eigen::Vector3d getT2(const HalfSpace& h) { return h.tangent2; }
-Eigen::Vector3d getOffset(const SphereContact& c) { return c.offset; }
-void setOffset(SphereContact& c, const Eigen::Vector3d& x) { c.offset = x; }
-Eigen::Vector3d getAOffset(const PointAnchor& c) { return c.offset; }
-void setAOffset(PointAnchor& c, const Eigen::Vector3d& x) { c.offset = x; }
-Eigen::Vector3d getTarget(const PointAnchor& c) { return c.target; }
-Eigen::Vector3d getAOffset2(const PointAnchor& c) { return c.offset2; }
-void setAOffset2(PointAnchor& c, const Eigen::Vector3d& x) { c.offset2 = x; }
-void setTarget(PointAnchor& c, const Eigen::Vector3d& x) { c.target = x; }
-double getTol(const SimulatorSettings& s) { return s.solver_settings.tolerance; }
-void setTol(SimulatorSettings& s, double x) { s.solver_settings.tolerance = x; }
-int getMaxIt(const SimulatorSettings& s) { return s.solver_settings.max_iterations; }
-void setMaxIt(SimulatorSettings& s, int x) { s.solver_settings.max_iterations = x; }
 int nq(const SimulatorModel& s) { return s.model.nq; }
 int nv(const SimulatorModel& s) { return s.model.nv; }
 long ncontacts(const SimulatorModel& s) { return static_cast<long>(s.contacts.size()); }
@@ -212,59 +223,83 @@ SimulatorSettings settingsOf(const SimulatorModel& s) { return s.settings; }
 }  // namespace
 
 void exposeSimulator() {
-  bp::class_<HalfSpace>("HalfSpace", "Free space {x : normal . x >= offset}; a ground or a wall.")
-      .def_readwrite("name", &HalfSpace::name)
-      .add_property("normal", &getNormal, &setNormal)
-      .def_readwrite("offset", &HalfSpace::offset)
-      .def_readwrite("frame", &HalfSpace::frame, "0: fixed in the world; else the body frame carrying it")
-      .add_property("tangent1", &getT1, "completed by SimulatorModel")
-      .add_property("tangent2", &getT2);
-  bp::class_<SphereContact>("SphereContact",
-                            "A sphere (radius 0: a point) fixed in a frame, against a half-space.")
-      .def_readwrite("name", &SphereContact::name)
-      .def_readwrite("frame", &SphereContact::frame)
-      .add_property("offset", &getOffset, &setOffset)
-      .def_readwrite("radius", &SphereContact::radius)
-      .def_readwrite("halfspace", &SphereContact::halfspace)
-      .def_readwrite("mu", &SphereContact::mu)
-      .def_readwrite("planar", &SphereContact::planar, "2 rows (t1, n) instead of 3");
-  bp::class_<GeometryPairContact>("GeometryPairContact",
-                                  "A collision pair of the GeometryModel handled by coal (general shapes).")
-      .def_readwrite("name", &GeometryPairContact::name)
-      .def_readwrite("pair", &GeometryPairContact::pair, "index into GeometryModel.collisionPairs")
-      .def_readwrite("mu", &GeometryPairContact::mu)
-      .def_readwrite("max_contacts", &GeometryPairContact::max_contacts);
-  bp::class_<PointAnchor>("PointAnchor", "A frame point held at a world point: 3 bilateral rows.")
-      .def_readwrite("name", &PointAnchor::name)
-      .def_readwrite("frame", &PointAnchor::frame)
-      .add_property("offset", &getAOffset, &setAOffset)
-      .add_property("target", &getTarget, &setTarget)
-      .def_readwrite("frame2", &PointAnchor::frame2, "0: hold at the world point target; else a frame")
-      .add_property("offset2", &getAOffset2, &setAOffset2);
+  {
+    bp::class_<HalfSpace> c("HalfSpace", "Free space {x : normal . x >= offset}; a ground or a wall.");
+    checkedMember(c, "name", &HalfSpace::name);
+    checkedMember(c, "normal", &HalfSpace::normal);
+    checkedMember(c, "offset", &HalfSpace::offset);
+    checkedMember(c, "frame", &HalfSpace::frame, "0: fixed in the world; else the body frame carrying it");
+    c.add_property("tangent1", +[](const HalfSpace& h) -> Eigen::Vector3d { return h.tangent1; }, "completed by SimulatorModel");
+    c.add_property("tangent2", +[](const HalfSpace& h) -> Eigen::Vector3d { return h.tangent2; });
+  }
+  {
+    bp::class_<SphereContact> c("SphereContact", "A sphere (radius 0: a point) fixed in a frame, against a half-space.");
+    checkedMember(c, "name", &SphereContact::name);
+    checkedMember(c, "frame", &SphereContact::frame);
+    checkedMember(c, "offset", &SphereContact::offset);
+    checkedMember(c, "radius", &SphereContact::radius);
+    checkedMember(c, "halfspace", &SphereContact::halfspace);
+    checkedMember(c, "mu", &SphereContact::mu);
+    checkedMember(c, "planar", &SphereContact::planar, "2 rows (t1, n) instead of 3");
+  }
+  {
+    bp::class_<GeometryPairContact> c("GeometryPairContact",
+                                      "A collision pair of the GeometryModel handled by coal (general shapes).");
+    checkedMember(c, "name", &GeometryPairContact::name);
+    checkedMember(c, "pair", &GeometryPairContact::pair, "index into GeometryModel.collisionPairs");
+    checkedMember(c, "mu", &GeometryPairContact::mu);
+    checkedMember(c, "max_contacts", &GeometryPairContact::max_contacts);
+  }
+  {
+    bp::class_<PointAnchor> c("PointAnchor", "A frame point held at a world point: 3 bilateral rows.");
+    checkedMember(c, "name", &PointAnchor::name);
+    checkedMember(c, "frame", &PointAnchor::frame);
+    checkedMember(c, "offset", &PointAnchor::offset);
+    checkedMember(c, "target", &PointAnchor::target);
+    checkedMember(c, "frame2", &PointAnchor::frame2, "0: hold at the world point target; else a frame");
+    checkedMember(c, "offset2", &PointAnchor::offset2);
+  }
   bp::enum_<IntegrationMode>("IntegrationMode")
       .value("timestep", IntegrationMode::kTimeStepping)
       .value("rk4", IntegrationMode::kRK4)
       .value("adaptive", IntegrationMode::kAdaptive);
-  bp::class_<SimulatorSettings>("SimulatorSettings")
-      .def_readwrite("dt", &SimulatorSettings::dt)
-      .def_readwrite("mode", &SimulatorSettings::mode)
-      .def_readwrite("delta", &SimulatorSettings::delta, "ODE modes: Baumgarte delta (eq. 64); 0 = dt")
-      .def_readwrite("zeta", &SimulatorSettings::zeta, "ODE modes: Baumgarte zeta (eq. 64)")
-      .def_readwrite("ode_tolerance", &SimulatorSettings::ode_tolerance)
-      .def_readwrite("min_dt", &SimulatorSettings::min_dt)
-      .def_readwrite("activation_distance", &SimulatorSettings::activation_distance)
-      .def_readwrite("solver", &SimulatorSettings::solver)
-      .def_readwrite("warm_start", &SimulatorSettings::warm_start)
-      .def_readwrite("implicit_pd", &SimulatorSettings::implicit_pd,
-                     "time stepping: joint PD implicit over the step (stable for any gains)")
-      .add_property("tolerance", &getTol, &setTol)
-      .add_property("max_iterations", &getMaxIt, &setMaxIt);
+  {
+    bp::class_<SimulatorSettings> c("SimulatorSettings");
+    checkedMember(c, "dt", &SimulatorSettings::dt,
+                  "time step; RK4 needs dt <= its stability bound in delta and zeta (SimulatorModel says)");
+    checkedMember(c, "mode", &SimulatorSettings::mode);
+    checkedMember(c, "delta", &SimulatorSettings::delta, "ODE modes: Baumgarte delta (eq. 64); 0 = dt");
+    checkedMember(c, "zeta", &SimulatorSettings::zeta, "ODE modes: Baumgarte zeta (eq. 64)");
+    checkedMember(c, "ode_tolerance", &SimulatorSettings::ode_tolerance);
+    checkedMember(c, "min_dt", &SimulatorSettings::min_dt);
+    checkedMember(c, "activation_distance", &SimulatorSettings::activation_distance);
+    checkedMember(c, "solver", &SimulatorSettings::solver);
+    checkedMember(c, "warm_start", &SimulatorSettings::warm_start);
+    checkedMember(c, "implicit_pd", &SimulatorSettings::implicit_pd,
+                  "time stepping: joint PD implicit over the step (stable for any gains)");
+    c.add_property(
+        "tolerance", +[](const SimulatorSettings& s) { return s.solver_settings.tolerance; },
+        +[](SimulatorSettings& s, const bp::object& x) {
+          s.solver_settings.tolerance = toDouble(x, "SimulatorSettings.tolerance");
+        });
+    c.add_property(
+        "max_iterations", +[](const SimulatorSettings& s) { return s.solver_settings.max_iterations; },
+        +[](SimulatorSettings& s, const bp::object& x) {
+          s.solver_settings.max_iterations = fromPython<int>(x, "SimulatorSettings.max_iterations");
+        });
+    c.add_property(
+        "time_limit", +[](const SimulatorSettings& s) { return s.solver_settings.time_limit; },
+        +[](SimulatorSettings& s, const bp::object& x) {
+          s.solver_settings.time_limit = toDouble(x, "SimulatorSettings.time_limit");
+        }, "per contact solve, seconds (0: none)");
+  }
   bp::class_<SimulatorModel, std::shared_ptr<SimulatorModel>>(
       "SimulatorModel", "Immutable description: pinocchio.Model, half-spaces, contacts, anchors, settings.",
       bp::no_init)
       .def("__init__", bp::make_constructor(&makeSimulatorModel, bp::default_call_policies(),
-                                            (bp::arg("model"), bp::arg("halfspaces"), bp::arg("contacts"),
-                                             bp::arg("anchors"), bp::arg("settings"),
+                                            (bp::arg("model") = bp::object(), bp::arg("halfspaces") = bp::list(),
+                                             bp::arg("contacts") = bp::list(), bp::arg("anchors") = bp::list(),
+                                             bp::arg("settings") = SimulatorSettings(),
                                              bp::arg("geometry") = bp::object(), bp::arg("pairs") = bp::list())))
       .add_property("nq", &nq)
       .add_property("nv", &nv)
@@ -276,10 +311,11 @@ void exposeSimulator() {
       .add_property("settings", &settingsOf);
   bp::class_<SimulatorData, std::shared_ptr<SimulatorData>, boost::noncopyable>(
       "SimulatorData", "Per-step workspace and state of a SimulatorModel.", bp::no_init)
-      .def("__init__", bp::make_constructor(&makeSimulatorData))
+      .def("__init__", bp::make_constructor(&makeSimulatorData, bp::default_call_policies(),
+                                            (bp::arg("sim") = bp::object())))
       .add_property("q", &get_q, &set_q)
       .add_property("v", &get_v, &set_v)
-      .def_readwrite("t", &SimulatorData::t)
+      .add_property("t", &get_t, &set_t)
       .add_property("kp", &get_kp, &set_kp)
       .add_property("kd", &get_kd, &set_kd)
       .add_property("q_target", &get_q_target, &set_q_target)
@@ -306,6 +342,15 @@ void exposeSimulator() {
       .def_readonly("iterations_step", &SimulatorData::iterations_step)
       .def_readonly("max_residual_step", &SimulatorData::max_residual_step)
       .def_readonly("all_converged_step", &SimulatorData::all_converged_step);
+  bp::def(
+      "rk4_stable_step",
+      +[](const bp::object& delta, const bp::object& zeta) {
+        const double d = toDouble(delta, "rk4_stable_step: delta"), z = toDouble(zeta, "rk4_stable_step: zeta");
+        if (!(d > 0.0) || !(z > 0.0)) throw std::invalid_argument("rk4_stable_step: delta and zeta must be positive");
+        return rk4StableStep(d, z);
+      },
+      (bp::arg("delta"), bp::arg("zeta") = 0.5),
+      "the largest dt SimulatorModel accepts in rk4 mode: 0.75 x RK4's stability limit on eq. 64");
   bp::def("step", &doStep, (bp::arg("sim"), bp::arg("data")), "advance one step");
   bp::def("build_contact_problem", &doBuild,
           (bp::arg("sim"), bp::arg("data"), bp::arg("q"), bp::arg("v"), bp::arg("delta"), bp::arg("zeta")),

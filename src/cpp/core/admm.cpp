@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "stiction/cone.hpp"
+#include "stiction/verdict.hpp"
 
 namespace stiction {
 
@@ -88,9 +89,11 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
   const Eigen::Index m = problem.numRows();
   const DelassusOperator& A = problem.delassus();
   const double scale = stoppingScale(problem);
+  StoppingTest test(problem, tolerance);
   if (!resume || primal_.size() != m) {
     symmetric_ = problem.isSymmetric();
-    L_ = std::max(largestEigenvalue(problem), 1e-300);
+    L_ = largestEigenvalue(problem);
+    if (!(L_ > 0.0)) L_ = 1.0;  // A = 0: no spectrum to scale rho by (1e-300 sent lambda to 1e302)
     prox_ = 1e-10 * L_;  // proximal term: keeps the linear solve well posed
     rho_ = initial_rho > 0.0 ? initial_rho : 1e-2 * L_;
     factorize(problem, rho_ + prox_);
@@ -130,12 +133,14 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
     y_ += rho_ * (primal_ - z_);
     A.multiply(z_, u_);
     u_ -= problem.b();
-    const double r = naturalMapNorm(problem, z_, u_) / scale;
-    if (r <= tolerance) {
-      message = "converged";
+    const double map = naturalMapNorm(problem, z_, u_);
+    const StoppingTest::Outcome outcome = test.check(z_, u_, map);
+    if (outcome != StoppingTest::kContinue) {
+      message = outcome == StoppingTest::kConverged ? "converged" : kUnresolvableMessage;
       ++it;
       break;
     }
+    const double r = map / scale;
     if (!std::isfinite(r)) {
       message = "diverged (non-finite residual)";
       ++it;

@@ -4,6 +4,9 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+
 namespace stiction {
 
 namespace {
@@ -15,7 +18,8 @@ std::string fmt(double x) {
 }  // namespace
 
 ContactProblem::ContactProblem(std::shared_ptr<const DelassusOperator> delassus, Eigen::VectorXd b,
-                               std::vector<Constraint> constraints, double asymmetry_tolerance)
+                               std::vector<Constraint> constraints, double asymmetry_tolerance,
+                               bool check_definiteness)
     : delassus_(std::move(delassus)), b_(std::move(b)), constraints_(std::move(constraints)) {
   if (!delassus_) throw std::invalid_argument("ContactProblem: no Delassus operator given");
   const Eigen::Index m = delassus_->rows();
@@ -58,6 +62,31 @@ ContactProblem::ContactProblem(std::shared_ptr<const DelassusOperator> delassus,
     throw std::invalid_argument("ContactProblem: A is not symmetric (max|A - A^T| / max|A| = " +
                                 fmt(asymmetry_) + " > asymmetry_tolerance = " + fmt(asymmetry_tolerance) +
                                 ")");
+  // (A zero diagonal leaves nothing to scale by: then A must be 0, as for a problem
+  // whose contacts all sit on things that cannot move.)
+  if (check_definiteness && m > 0 && A.diagonal().maxCoeff() == 0.0 && A.cwiseAbs().maxCoeff() > 0.0)
+    throw std::invalid_argument("ContactProblem: A is not positive semi-definite (zero diagonal, non-zero "
+                                "off-diagonal entries); a Delassus operator J M^-1 J^T never is");
+  if (check_definiteness && m > 0 && A.diagonal().maxCoeff() > 0.0) {
+    const double max_diag = A.diagonal().maxCoeff();
+    Eigen::MatrixXd H = 0.5 * (A + A.transpose());
+    H.diagonal().array() += kIndefiniteTolerance * max_diag;
+    Eigen::LLT<Eigen::MatrixXd> llt(H);
+    if (llt.info() != Eigen::Success) {
+      std::string detail;
+      if (m <= 500) {  // name the offending eigenvalue when it is cheap to
+        H.diagonal().array() -= kIndefiniteTolerance * max_diag;
+        const double lo = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(H, Eigen::EigenvaluesOnly).eigenvalues()[0];
+        detail = "its smallest eigenvalue is " + fmt(lo) + " = " + fmt(lo / max_diag) + " x max diag";
+      } else {
+        detail = "the Cholesky factorization of A + " + fmt(kIndefiniteTolerance) + " max(diag A) I fails";
+      }
+      throw std::invalid_argument(
+          "ContactProblem: A is not positive semi-definite (" + detail +
+          ", below the tolerance -" + fmt(kIndefiniteTolerance) +
+          " x max diag); a Delassus operator J M^-1 J^T never is: check how A was assembled");
+    }
+  }
 }
 
 void ContactProblem::setB(const Eigen::Ref<const Eigen::VectorXd>& b) {

@@ -1,5 +1,6 @@
 #include "stiction/delassus.hpp"
 
+#include <cmath>
 #include <stdexcept>
 
 namespace stiction {
@@ -13,6 +14,12 @@ DenseDelassus::DenseDelassus(Eigen::MatrixXd A) : A_(std::move(A)) {
 void DenseDelassus::multiply(const Eigen::Ref<const Eigen::VectorXd>& x,
                              Eigen::Ref<Eigen::VectorXd> y) const {
   y.noalias() = A_ * x;
+}
+
+void DenseDelassus::absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x,
+                                Eigen::Ref<Eigen::VectorXd> y) const {
+  y.setZero();
+  for (Eigen::Index j = 0; j < A_.cols(); ++j) y += A_.col(j).cwiseAbs() * std::abs(x[j]);  // no |A| copy
 }
 
 void DenseDelassus::addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,

@@ -122,7 +122,7 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   const auto& off = problem.offsets();
   const Eigen::MatrixXd& A = problem.delassus().dense();
   const Eigen::Index m = problem.numRows();
-  const double scale = stoppingScale(problem);
+  StoppingTest test(problem, tolerance);
   kappa_.resize(cons.size());
   for (std::size_t i = 0; i < cons.size(); ++i) {
     const double tr = A.diagonal().segment(off[i], cons[i].size).sum();
@@ -135,8 +135,9 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   evaluate(problem, lam, false);  // the Jacobian only once a step is needed
   double f_norm = F_.norm();
   for (; step < max_steps; ++step) {
-    if (naturalMapNorm(problem, lam, u_) / scale <= tolerance) {
-      message = "converged";
+    const StoppingTest::Outcome outcome = test.check(lam, u_, naturalMapNorm(problem, lam, u_));
+    if (outcome != StoppingTest::kContinue) {
+      message = outcome == StoppingTest::kConverged ? "converged" : kUnresolvableMessage;
       break;
     }
     if (time_limit > 0.0 && std::chrono::duration<double>(Clock::now() - start).count() > time_limit) {
@@ -198,14 +199,13 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
                             SolverResult& result) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
+  auto seconds_since = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
+  // Every stage gets what is left of the time limit (0 = none).
   auto remaining = [&]() {
     if (settings.time_limit <= 0.0) return 0.0;
-    return std::max(1e-9, settings.time_limit - std::chrono::duration<double>(Clock::now() - start).count());
+    return std::max(1e-9, settings.time_limit - seconds_since(start));
   };
-  auto out_of_time = [&]() {
-    return settings.time_limit > 0.0 &&
-           std::chrono::duration<double>(Clock::now() - start).count() >= settings.time_limit;
-  };
+  auto out_of_time = [&]() { return settings.time_limit > 0.0 && seconds_since(start) >= settings.time_limit; };
   Eigen::VectorXd& lam = result.lam;
   const int budget = settings.max_iterations;
   const double tol = settings.tolerance;
@@ -218,109 +218,150 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
   // The initial guess's residual is only needed once something failed (keeps the
   // usual warm-started single Newton step free of extra products).
   double best_res = std::numeric_limits<double>::infinity();
+  std::string best_stage = "initial guess";  // (short: no allocation)
   bool initial_scored = false;
   // NSGS hands over when its rate predicts more sweeps than ~6 dense Newton
   // steps would cost (measured on FCLib: one step ~ m/12 sweeps; Newton
   // typically needs 5-30 steps).
   const double m = static_cast<double>(problem.numRows());
   const double switch_after = std::max(50.0, m / 2.0);
-  double r = best_res;
   auto score = [&](const Eigen::VectorXd& x) {
     problem.delassus().multiply(x, u_ws_);
     u_ws_ -= problem.b();
     return naturalMapNorm(problem, x, u_ws_);
   };
-  auto keep_best = [&](const Eigen::VectorXd& x) {
+  auto keep_best = [&](const Eigen::VectorXd& x, const std::string& stage) {
     if (!initial_scored) {
       initial_scored = true;
       best_res = score(initial_);
     }
-    r = score(x);
+    const double r = score(x);
     if (r < best_res) {
       best_ = x;
       best_res = r;
+      best_stage = stage;
     }
   };
+  // Each stage's cost goes into result.stages.
+  auto record = [&](const char* name, int iterations, Clock::time_point t0, const std::string& outcome) {
+    result.stages.push_back({name, iterations, seconds_since(t0), outcome});
+  };
   // Newton from `lam` for at most `steps` (within the budget); true when it converged.
-  auto newton_from_here = [&](int steps) {
-    used += newton_.run(problem, lam, std::min(steps, std::max(0, budget - used)), tol, remaining(), newton_msg);
+  auto newton_from_here = [&](int steps, const char* name) {
+    if (used >= budget) return false;  // nothing left: no empty stage in the report
+    const auto t0 = Clock::now();
+    const int done = newton_.run(problem, lam, std::min(steps, std::max(0, budget - used)), tol, remaining(), newton_msg);
+    used += done;
+    record(name, done, t0, newton_msg);
     if (newton_msg == "converged") return true;
-    keep_best(lam);
+    keep_best(lam, name);
     return false;
   };
-  auto finish = [&](const char* how) {
+  auto finish = [&](const std::string& how) {
     result.iterations = used;
     result.message = how;
   };
+  // A stage found lambda where the tolerance cannot be verified in double
+  // precision: no other stage will do better at that scale; the verdict says so.
+  auto unresolvable = [&](const std::string& stage_msg) { return stage_msg == kUnresolvableMessage; };
   if (problem.numRows() <= kNewtonFirstRows) {
     // 1a. Small problems (a robot's feet, a box's corners): a dense Newton step
     //     costs less than a few Gauss-Seidel sweeps and converges in a handful.
-    if (newton_from_here(30)) return finish("converged (newton)");
+    if (newton_from_here(30, "newton")) return finish("converged (newton)");
+    if (unresolvable(newton_msg)) return finish(newton_msg + " (newton)");
     // 1a'. Newton from ProxQP's facetized-cone QP solution: measured on stick-dominated,
     //      ill-conditioned problems (a 1e4 stack at rest), where Newton stalls from zero
     //      and converges in one step from the QP point; the QP costs ~0.1-0.3 ms at this
     //      size (docs/warm-start.md), so only after a failure and only for small problems.
-    if (used < budget) {
-      try {
-        proxqpWarmStart(problem, settings, lam);
-        if (newton_from_here(30)) return finish("converged (proxqp, newton)");
-      } catch (const std::runtime_error&) {
-        // ProxQP failed: carry on with the fallbacks below
+    if (used < budget && !out_of_time()) {
+      Eigen::VectorXd ray;
+      StageReport qp = proxqpWarmStart(problem, settings, remaining(), lam, &ray);
+      result.warm_start_iterations += qp.iterations;
+      result.warm_start_seconds += qp.seconds;
+      result.stages.push_back(qp);
+      if (ray.size() == lam.size()) result.divergence_candidates.push_back(ray);
+      const bool usable = qp.outcome == "solved" || qp.outcome == "iteration limit reached" ||
+                          qp.outcome == "time limit reached";
+      if (usable && !out_of_time()) {
+        if (newton_from_here(30, "newton (from proxqp)")) return finish("converged (proxqp, newton)");
+        if (unresolvable(newton_msg)) return finish(newton_msg + " (newton from proxqp)");
       }
     }
   } else {
     // 1b. Large problems: NSGS while it makes progress (a sweep costs one product
     //     with A), then Newton from the NSGS iterate where Gauss-Seidel crawls.
-    used += nsgs_.sweep(problem, lam, budget, tol, switch_after, remaining(), msg);
-    if (msg != "stalled") {
-      result.iterations = used;
-      result.message = msg;
-      return;
-    }
-    keep_best(lam);
-    if (newton_from_here(50)) return finish("converged (nsgs, newton)");
+    const auto t0 = Clock::now();
+    const int sweeps = nsgs_.sweep(problem, lam, budget, tol, switch_after, remaining(), msg);
+    used += sweeps;
+    record("nsgs", sweeps, t0, msg);
+    if (msg != "stalled") return finish(msg == "converged" ? msg : msg + " (nsgs)");
+    keep_best(lam, "nsgs");
+    if (newton_from_here(50, "newton")) return finish("converged (nsgs, newton)");
+    if (unresolvable(newton_msg)) return finish(newton_msg + " (newton)");
     // Newton from the initial guess: on some problems the NSGS iterate sits in
     // a region where the line search stalls and the guess does not (SpheresBox).
-    lam = initial_;
-    if (newton_from_here(50)) return finish("converged (nsgs, newton)");
+    if (!out_of_time()) {
+      lam = initial_;
+      if (newton_from_here(50, "newton (from the initial guess)")) return finish("converged (nsgs, newton)");
+      if (unresolvable(newton_msg)) return finish(newton_msg + " (newton)");
+    }
+  }
+  // 2. Before the long fallbacks: if even the best iterate's own rounding moves the
+  //    residual beyond the tolerance (lambda ~ 1e12 on a nearly singular A), no
+  //    stage can verify anything at that scale: stop and let the verdict say so.
+  if (initial_scored && precisionFloor(problem, best_) > kFloorMargin * tol * stoppingScale(problem)) {
+    lam = best_;
+    return finish(std::string(kUnresolvableMessage) + " at the best iterate (from " + best_stage + ")");
   }
   // 3. Alternate chunks of NSGS and of ADMM (never diverges, handles rank
   //    deficiency; its state carries over between its chunks), each followed by
   //    a Newton attempt from the chunk's iterate, until the budget is spent.
   bool admm_started = false, use_admm = false;
   Eigen::VectorXd admm_state = best_;
+  std::string last = result.stages.empty() ? "the start" : result.stages.back().name;
   while (used < budget && !out_of_time()) {
     const int chunk = std::min(500, budget - used);
+    const auto t0 = Clock::now();
+    int done;
     if (use_admm) {
       lam = admm_state;
-      used += admm_.run(problem, lam, chunk, tol, remaining(), 0.0, admm_started, msg);
+      done = admm_.run(problem, lam, chunk, tol, remaining(), 0.0, admm_started, msg);
       admm_started = true;
       admm_state = lam;
     } else {
       lam = best_;
-      used += nsgs_.sweep(problem, lam, chunk, tol, switch_after, remaining(), msg);
+      done = nsgs_.sweep(problem, lam, chunk, tol, switch_after, remaining(), msg);
     }
-    keep_best(lam);
-    if (msg == "converged") {
-      result.iterations = used;
-      result.message = use_admm ? "converged (nsgs, newton, admm)" : "converged (nsgs, newton, nsgs)";
-      return;
-    }
+    used += done;
+    last = use_admm ? "admm" : "nsgs";
+    record(use_admm ? "admm" : "nsgs", done, t0, msg);
+    keep_best(lam, last);
+    if (msg == "converged") return finish(use_admm ? "converged (nsgs, newton, admm)" : "converged (nsgs, newton, nsgs)");
+    if (unresolvable(msg)) return finish(msg + " (" + last + ")");
     if (msg == "time limit reached" || used >= budget) break;
     trial_ = lam;
-    used += newton_.run(problem, trial_, std::min(20, budget - used), tol, remaining(), newton_msg);
-    keep_best(trial_);
+    const auto t1 = Clock::now();
+    const int steps = newton_.run(problem, trial_, std::min(20, budget - used), tol, remaining(), newton_msg);
+    used += steps;
+    last = use_admm ? "newton (from admm)" : "newton (from nsgs)";
+    record(last.c_str(), steps, t1, newton_msg);
+    keep_best(trial_, last);
     if (newton_msg == "converged") {
       lam = trial_;
-      result.iterations = used;
-      result.message = "converged (nsgs, newton, admm/nsgs, newton)";
-      return;
+      return finish("converged (nsgs, newton, admm/nsgs, newton)");
+    }
+    if (unresolvable(newton_msg)) {
+      lam = trial_;
+      return finish(newton_msg + " (" + last + ")");
     }
     use_admm = !use_admm;
   }
+  // An ADMM state far larger than the best iterate is a direction of divergence:
+  // the verdict tests it as an infeasibility certificate.
+  if (admm_started) result.divergence_candidates.push_back(admm_state);
   lam = best_;
-  result.iterations = used;
-  result.message = out_of_time() ? "time limit reached" : "iteration limit reached";
+  finish(std::string(out_of_time() ? "time limit reached" : "iteration limit reached") + " after " + last +
+         "; returning the best iterate (from " + best_stage + ")");
 }
 
 }  // namespace stiction

@@ -7,6 +7,7 @@
 
 #include "stiction/cone.hpp"
 #include "stiction/local_solve.hpp"
+#include "stiction/verdict.hpp"
 
 namespace stiction {
 
@@ -72,6 +73,7 @@ int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   const auto& off = problem.offsets();
   const DelassusOperator& A = problem.delassus();
   const double scale = stoppingScale(problem);
+  StoppingTest test(problem, tolerance);
 
   // Start from a feasible point.
   for (std::size_t i = 0; i < cons.size(); ++i) {
@@ -147,16 +149,22 @@ int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int m
       A.multiply(lam, u_);
       u_ -= problem.b();
     }
-    double r = naturalMapNorm(problem, lam, u_) / scale;
-    if (r <= tolerance) {
+    double map = naturalMapNorm(problem, lam, u_);
+    if (map <= test.threshold()) {  // confirm on a fresh u, with the rounding bound
       A.multiply(lam, u_);
       u_ -= problem.b();
-      r = naturalMapNorm(problem, lam, u_) / scale;
-      if (r <= tolerance) {
+      map = naturalMapNorm(problem, lam, u_);
+      const StoppingTest::Outcome outcome = test.check(lam, u_, map);
+      if (outcome == StoppingTest::kConverged) {
         message = "converged";
         break;
       }
+      if (outcome == StoppingTest::kUnresolvable) {
+        message = kUnresolvableMessage;
+        break;
+      }
     }
+    const double r = map / scale;
     if (!std::isfinite(r)) {
       message = "diverged (non-finite residual)";
       break;

@@ -1,20 +1,28 @@
 #include "stiction/proxqp_warm_start.hpp"
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
-#include <stdexcept>
 
 #include <proxsuite/proxqp/dense/dense.hpp>
 
 namespace stiction {
 
-int proxqpWarmStart(const ContactProblem& problem, const SolverSettings& settings, Eigen::VectorXd& lam) {
+StageReport proxqpWarmStart(const ContactProblem& problem, const SolverSettings& settings, double time_limit,
+                            Eigen::VectorXd& lam, Eigen::VectorXd* ray) {
   namespace pq = proxsuite::proxqp;
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  auto elapsed = [&]() { return std::chrono::duration<double>(Clock::now() - start).count(); };
+  StageReport report;
+  report.name = "proxqp";
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
   const Eigen::Index m = problem.numRows();
   if (m == 0) {
     lam.resize(0);
-    return 0;
+    report.outcome = "solved";
+    return report;
   }
   const int facets = std::max(3, settings.proxqp_facets);
   Eigen::Index n_in = 0;
@@ -50,27 +58,72 @@ int proxqpWarmStart(const ContactProblem& problem, const SolverSettings& setting
   }
   const Eigen::MatrixXd& A = problem.delassus().dense();
   Eigen::MatrixXd H = 0.5 * (A + A.transpose());
+  const double max_diag = std::max(H.diagonal().maxCoeff(), 1e-300);
   // A is only positive semi-definite; a tiny shift keeps ProxQP's KKT solves honest.
-  H.diagonal().array() += 1e-12 * std::max(H.diagonal().maxCoeff(), 1e-300);
+  H.diagonal().array() += 1e-12 * max_diag;
   const Eigen::VectorXd g = -problem.b();
   const Eigen::VectorXd lower = Eigen::VectorXd::Constant(n_in, -1e20);
   const Eigen::VectorXd upper = Eigen::VectorXd::Zero(n_in);
 
   pq::dense::QP<double> qp(m, 0, n_in);
-  qp.settings.eps_abs = settings.proxqp_tolerance;
-  qp.settings.eps_rel = 0.0;
+  // Relative tolerances: eps_rel scales with ProxQP's own residual terms; the absolute
+  // floor with the smaller of b's scale (dual residual) and lambda's ~ b / A (primal).
+  // (An absolute 1e-8 at ||b|| = 1e8 asks for 1e-16 relative: 4.6 million iterations.)
+  const double b_scale = problem.b().lpNorm<Eigen::Infinity>();
+  qp.settings.eps_rel = settings.proxqp_tolerance;
+  qp.settings.eps_abs = std::max(1e-300, settings.proxqp_tolerance * std::min(b_scale, b_scale / max_diag));
   qp.settings.eps_primal_inf = 1e-12;  // avoids spurious PRIMAL_INFEASIBLE on rank-deficient A
-  qp.settings.max_iter = 10000;
   qp.settings.verbose = false;
   qp.init(H, g, proxsuite::nullopt, proxsuite::nullopt, C, lower, upper);
-  qp.solve();
-  const auto status = qp.results.info.status;
-  if (status != pq::QPSolverOutput::PROXQP_SOLVED &&
-      status != pq::QPSolverOutput::PROXQP_MAX_ITER_REACHED)
-    throw std::runtime_error("ProxQP warm start failed (status " + std::to_string(int(status)) + ")");
+
+  // Chunks of inner iterations: at most the iteration budget, and with a time limit
+  // at most half the remaining time at the cost per iteration measured so far (a
+  // first guess from the sizes: a few products with the m x (m + n_in) system).
+  const long budget = std::max(1, settings.proxqp_max_iterations);
+  long used = 0;
+  double per_iteration = 4e-9 * static_cast<double>(m) * static_cast<double>(m + n_in) + 1e-7;
+  report.outcome = "iteration limit reached";
+  for (int call = 0;; ++call) {
+    long chunk = budget - used;
+    if (time_limit > 0.0) {
+      const double remaining = time_limit - elapsed();
+      chunk = std::min<long>(chunk, static_cast<long>(0.5 * remaining / per_iteration));
+      if (chunk < 1) {
+        report.outcome = "time limit reached";
+        break;
+      }
+    }
+    if (chunk < 1) break;
+    qp.settings.max_iter_in = std::min<long>(chunk, 1500);
+    qp.settings.max_iter = std::max<long>(1, chunk / qp.settings.max_iter_in);
+    if (call > 0) qp.settings.initial_guess = pq::InitialGuessStatus::WARM_START_WITH_PREVIOUS_RESULT;
+    const double t0 = elapsed();
+    qp.solve();
+    const long done = std::max<long>(1, static_cast<long>(qp.results.info.iter));
+    used += done;
+    per_iteration = (elapsed() - t0) / done;  // call overheads included: they are real
+    const auto status = qp.results.info.status;
+    if (status == pq::QPSolverOutput::PROXQP_SOLVED) {
+      report.outcome = "solved";
+      break;
+    }
+    if (status == pq::QPSolverOutput::PROXQP_DUAL_INFEASIBLE) {
+      // The QP is unbounded below: x is a ray with A x ~ 0, x in C_F, b'x > 0.
+      report.outcome = "unbounded (b pushes along a direction A does not resist)";
+      if (ray != nullptr && qp.results.x.allFinite()) *ray = qp.results.x;
+      break;
+    }
+    if (status != pq::QPSolverOutput::PROXQP_MAX_ITER_REACHED) {
+      report.outcome = "failed (ProxQP status " + std::to_string(static_cast<int>(status)) + ")";
+      break;
+    }
+    if (used >= budget) break;
+  }
+  report.iterations = static_cast<int>(std::min<long>(used, 2147483647L));
   lam = qp.results.x;
-  if (!lam.allFinite()) lam.setZero();
-  return static_cast<int>(qp.results.info.iter);
+  if (report.outcome.rfind("unbounded", 0) == 0 || !lam.allFinite()) lam.setZero();
+  report.seconds = elapsed();
+  return report;
 }
 
 }  // namespace stiction

@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 
 #include "stiction/admm.hpp"
@@ -18,41 +19,6 @@ void SolverResult::resize(Eigen::Index rows, std::size_t blocks) {
   states.resize(blocks);
 }
 
-double naturalMapNorm(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
-                      const Eigen::Ref<const Eigen::VectorXd>& u) {
-  const auto& cons = problem.constraints();
-  const auto& off = problem.offsets();
-  double sq = 0.0;
-  for (std::size_t i = 0; i < cons.size(); ++i) {
-    const Eigen::Index o = off[i];
-    const double mu = cons[i].mu;
-    switch (cons[i].kind) {
-      case ConstraintKind::kBilateral:  // P_C = identity on R^k
-        sq += u.segment(o, cons[i].size).squaredNorm();
-        break;
-      case ConstraintKind::kUnilateral: {
-        const double r = lam[o] - std::max(0.0, lam[o] - u[o]);
-        sq += r * r;
-        break;
-      }
-      case ConstraintKind::kPlanarFriction: {
-        Eigen::Vector2d z(lam[o] - u[o], lam[o + 1] - u[o + 1] - mu * std::abs(u[o]));
-        projectPlanarCone(z, mu);
-        sq += (lam.segment<2>(o) - z).squaredNorm();
-        break;
-      }
-      case ConstraintKind::kSpatialFriction: {
-        Eigen::Vector3d z = lam.segment<3>(o) - u.segment<3>(o);
-        z[2] -= mu * norm2(u[o], u[o + 1]);  // De Saxce: u + E s(u), eq. 76-77
-        projectSpatialCone(z, mu);
-        sq += (lam.segment<3>(o) - z).squaredNorm();
-        break;
-      }
-    }
-  }
-  return std::sqrt(sq);
-}
-
 double residual(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam) {
   if (lam.size() != problem.numRows())
     throw std::invalid_argument("residual: lambda has " + std::to_string(lam.size()) +
@@ -62,11 +28,6 @@ double residual(const ContactProblem& problem, const Eigen::Ref<const Eigen::Vec
   problem.delassus().multiply(lam, u);
   u -= problem.b();
   return naturalMapNorm(problem, lam, u) / (1.0 + problem.b().norm());
-}
-
-double stoppingScale(const ContactProblem& problem) {
-  const double nb = problem.b().norm();
-  return nb > 0.0 ? nb : 1.0;
 }
 
 void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
@@ -124,19 +85,54 @@ std::unique_ptr<ContactSolver> makeSolver(const std::string& name) {
 
 std::vector<std::string> solverNames() { return {"default", "nsgs", "admm", "newton"}; }
 
+namespace {
+
+std::string fmt(double x) {
+  std::ostringstream os;
+  os.precision(3);
+  os << x;
+  return os.str();
+}
+
+std::string blockList(const ContactProblem& problem, const std::vector<int>& blocks) {
+  std::string out;
+  for (std::size_t k = 0; k < blocks.size() && k < 8; ++k)
+    out += (k ? ", " : "") + std::to_string(blocks[k]) + " (" + problem.constraints()[blocks[k]].describe() + ")";
+  if (blocks.size() > 8) out += ", ...";
+  return out;
+}
+
+bool startsWith(const std::string& s, const char* prefix) { return s.rfind(prefix, 0) == 0; }
+
+}  // namespace
+
 void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSettings& settings,
            SolverResult& result, const Eigen::VectorXd* guess) {
   using Clock = std::chrono::steady_clock;
   if (!(settings.tolerance > 0.0) || !std::isfinite(settings.tolerance))
-    throw std::invalid_argument("solver tolerance must be a positive finite number");
-  if (settings.max_iterations < 0) throw std::invalid_argument("max_iterations must be >= 0");
+    throw std::invalid_argument("solver tolerance must be a positive finite number, got " + fmt(settings.tolerance));
+  if (settings.max_iterations < 0)
+    throw std::invalid_argument("max_iterations must be >= 0, got " + std::to_string(settings.max_iterations));
+  if (!(settings.time_limit >= 0.0) || !std::isfinite(settings.time_limit))
+    throw std::invalid_argument("time_limit must be a finite number of seconds >= 0 (0: none), got " +
+                                fmt(settings.time_limit));
+  if (!(settings.proxqp_tolerance > 0.0) || !std::isfinite(settings.proxqp_tolerance))
+    throw std::invalid_argument("proxqp_tolerance must be a positive finite number");
+  if (settings.proxqp_max_iterations < 1) throw std::invalid_argument("proxqp_max_iterations must be >= 1");
   const auto start = Clock::now();
+  auto elapsed = [&]() { return std::chrono::duration<double>(Clock::now() - start).count(); };
+  forgetVerdicts();  // A or b may have changed in place since the last solve
   const Eigen::Index m = problem.numRows();
   result.resize(m, problem.numBlocks());
   result.solver = solver.name();
   result.warm_start_seconds = 0.0;
   result.warm_start_iterations = 0;
   result.iterations = 0;
+  result.stages.clear();
+  result.divergence_candidates.clear();
+  result.implicated_blocks.clear();
+  result.min_solution_norm = 0.0;
+  result.message.clear();
   switch (settings.warm_start) {
     case WarmStart::kNone: result.lam.setZero(); break;
     case WarmStart::kGiven:
@@ -147,25 +143,94 @@ void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSet
       if (!guess->allFinite()) throw std::invalid_argument("initial lambda has NaN or infinite entries");
       result.lam = *guess;
       break;
-    case WarmStart::kProxQP: {
-      const auto t0 = Clock::now();
-      result.warm_start_iterations = proxqpWarmStart(problem, settings, result.lam);
-      result.warm_start_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-      break;
-    }
+    case WarmStart::kProxQP: result.lam.setZero(); break;
   }
-  solver.iterate(problem, settings, result);
-  // The common verdict, whatever the algorithm.
+  // A contact that nothing can move but b pushes closed has no solution: say so
+  // before spending the budget (the verdict below names it).
+  const bool hopeless = beyondPrecision(problem, findInfeasibility(problem, {}).min_solution_norm);
+  if (!hopeless) {
+    if (settings.warm_start == WarmStart::kProxQP) {
+      Eigen::VectorXd ray;
+      StageReport qp = proxqpWarmStart(problem, settings, settings.time_limit, result.lam, &ray);
+      qp.name = "proxqp (warm start)";
+      result.warm_start_iterations = qp.iterations;
+      result.warm_start_seconds = qp.seconds;
+      if (ray.size() == m) result.divergence_candidates.push_back(ray);
+      result.stages.push_back(qp);
+    }
+    // The algorithm gets what is left of the time limit.
+    SolverSettings local = settings;
+    if (settings.time_limit > 0.0) local.time_limit = std::max(1e-9, settings.time_limit - elapsed());
+    const auto t0 = Clock::now();
+    const std::size_t stages_before = result.stages.size();
+    solver.iterate(problem, local, result);
+    if (result.stages.size() == stages_before)  // a single-stage algorithm: report it as one
+      result.stages.push_back({solver.name(), result.iterations,
+                               std::chrono::duration<double>(Clock::now() - t0).count(), result.message});
+  } else {
+    result.message = "no algorithm run";
+  }
+
+  // The common verdict, whatever the algorithm (verdict.hpp).
   problem.delassus().multiply(result.lam, result.u);
   result.u -= problem.b();
-  const double map = naturalMapNorm(problem, result.lam, result.u);
-  result.residual = map / (1.0 + problem.b().norm());
-  result.relative_residual = map / stoppingScale(problem);
+  const double scale = stoppingScale(problem);
+  const double threshold = settings.tolerance * scale;
+  VerdictMeasures measures;
+  measureVerdict(problem, result.lam, measures, threshold);
+  result.residual = measures.natural_map / (1.0 + problem.b().norm());
+  result.relative_residual = measures.natural_map / scale;
+  result.residual_bound = measures.bound / scale;
+  result.precision_floor = measures.floor / scale;
+  result.lambda_norm = result.lam.norm();
   classifyStates(problem, result.lam, result.u, result.states);
-  result.converged = std::isfinite(map) && result.relative_residual <= settings.tolerance &&
-                     result.lam.allFinite();
-  if (!result.converged && result.message == "converged") result.message = "residual above tolerance";
-  result.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  const bool finite = std::isfinite(measures.natural_map) && std::isfinite(measures.bound) && result.lam.allFinite();
+  if (finite && measures.natural_map + measures.bound <= threshold) {
+    result.status = SolveStatus::kConverged;
+  } else {
+    std::string why = result.message;
+    if (startsWith(why, "converged")) why = "residual above tolerance " + why.substr(std::min<std::size_t>(10, why.size()));
+    result.divergence_candidates.push_back(result.lam);
+    const InfeasibilityCertificate cert = findInfeasibility(problem, result.divergence_candidates);
+    result.min_solution_norm = cert.min_solution_norm;
+    if (beyondPrecision(problem, cert.min_solution_norm)) {
+      result.status = SolveStatus::kInfeasible;
+      result.implicated_blocks = cert.blocks;
+      result.message = std::isinf(cert.min_solution_norm)
+                           ? "no solution: b pushes block(s) " + blockList(problem, cert.blocks) +
+                                 " closed along a direction A does not resist (a contact on something "
+                                 "that cannot move, or contacts pushing against each other); lambda would "
+                                 "grow without bound"
+                           : "no solution of a size double precision can verify: every solution has "
+                             "||lambda|| >= " + fmt(cert.min_solution_norm) + " (b pushes block(s) " +
+                                 blockList(problem, cert.blocks) + " along a direction A barely resists)";
+      result.message += " [" + why + "]";
+    } else if (!finite || measures.floor > kFloorMargin * threshold) {
+      result.status = SolveStatus::kUnresolvable;
+      // the blocks whose lambda's rounding moves the residual most
+      measureVerdict(problem, result.lam, measures, threshold, /*per_block=*/true);
+      double worst = 0.0;
+      for (double e : measures.block_floor) worst = std::max(worst, e);
+      for (std::size_t i = 0; i < measures.block_floor.size(); ++i)
+        if (measures.block_floor[i] >= 0.1 * worst && worst > 0.0)
+          result.implicated_blocks.push_back(static_cast<int>(i));
+      result.message = !finite ? "diverged: non-finite lambda or residual"
+                               : "residual not resolvable in double precision (lambda scale ||lambda|| = " +
+                                     fmt(result.lambda_norm) + ": rounding lambda alone moves the residual by up to " +
+                                     fmt(result.precision_floor) + " x ||b||, far above the tolerance " +
+                                     fmt(settings.tolerance) + "; residual " + fmt(result.relative_residual) +
+                                     " x ||b||)";
+      result.message += " [" + why + "]";
+    } else {
+      result.status = SolveStatus::kNotConverged;
+      result.message = why;
+      if (cert.min_solution_norm > 0.0)
+        result.message += " (every solution has ||lambda|| >= " + fmt(cert.min_solution_norm) + ")";
+    }
+  }
+  result.converged = result.status == SolveStatus::kConverged;
+  result.divergence_candidates.clear();
+  result.seconds = elapsed();
 }
 
 }  // namespace stiction

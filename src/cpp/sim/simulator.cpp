@@ -2,6 +2,8 @@
 // compile: keep them here).
 #include "stiction/simulator.hpp"
 
+#include "stiction/rk4_stability.hpp"
+
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -105,6 +107,21 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
   if (!(s.zeta > 0.0) || !std::isfinite(s.zeta)) throw std::invalid_argument("zeta must be positive");
   if (!(s.ode_tolerance > 0.0)) throw std::invalid_argument("ode_tolerance must be positive");
   if (!(s.activation_distance >= 0.0)) throw std::invalid_argument("activation_distance must be >= 0");
+  if (!(s.min_dt > 0.0)) throw std::invalid_argument("min_dt must be positive");
+  if (s.mode == IntegrationMode::kRK4) {
+    // Explicit RK4 on eq. 64 is stable only for dt below ~2.6 delta (zeta = 1/2): beyond,
+    // a cube at rest on a slope leaves at 173 m/s. Refuse rather than blow up.
+    const double delta = s.delta > 0.0 ? s.delta : s.dt;
+    const double limit = rk4StableStep(delta, s.zeta);
+    if (s.dt > limit) {
+      std::ostringstream os;
+      os << "rk4: dt = " << s.dt << " is too large for the contact relaxation (eq. 64) with delta = " << delta
+         << ", zeta = " << s.zeta << ": RK4 is stable up to " << rk4StabilityLimit(delta, s.zeta)
+         << " s; the largest stable dt accepted is " << limit << " s (" << limit / delta
+         << " delta). Use dt <= " << limit << ", a larger delta, or mode 'adaptive' (which controls its step)";
+      throw std::invalid_argument(os.str());
+    }
+  }
   makeSolver(s.solver);  // throws on an unknown name
   for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
     if (model.joints[j].shortname() == "JointModelFreeFlyer") free_flyers.push_back(j);
@@ -420,7 +437,7 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
   }
   // M = U D U^T by Pinocchio's tree-sparse Cholesky (cheaper than a dense LLT).
   pinocchio::cholesky::decompose(model, data);
-  if (!(data.D.minCoeff() > 0.0))
+  if (model.nv > 0 && !(data.D.minCoeff() > 0.0))
     throw std::runtime_error("the mass matrix is not positive definite at this configuration");
   nonLinearEffectsFromKinematics(model, data, sd.forces, sd.nle);
   computeControl(sim, sd, q, v);
@@ -448,6 +465,52 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
 
 namespace {
 
+// Forces whose own rounding moves the residual by more than kLooseTolerance (relative
+// to ||b||) diverged, whatever the tolerance (verdict.hpp).
+constexpr double kDivergedFloor = kLooseTolerance;
+
+// The name of block `blk` of the current problem: a candidate contact, then the anchors.
+std::string blockName(const SimulatorModel& sim, const SimulatorData& sd, int blk) {
+  if (blk < static_cast<int>(sd.active.size())) {
+    const int i = sd.active[blk];
+    if (sim.slot_pair[i] < 0) return "contact '" + sim.contacts[i].name + "'";
+    const int first_slot = static_cast<int>(sim.contacts.size());
+    int slot = i - first_slot;
+    for (int p = 0; p < sim.slot_pair[i]; ++p) slot -= sim.pairs[p].max_contacts;
+    return "contact '" + sim.pairs[sim.slot_pair[i]].name + "#" + std::to_string(slot) + "'";
+  }
+  return "anchor '" + sim.anchors[blk - sd.active.size()].name + "'";
+}
+
+// Why a step cannot go on: the contact problem has no solution, or none double
+// precision can resolve; names the contacts involved and t.
+std::string unsolvableMessage(const SimulatorModel& sim, const SimulatorData& sd) {
+  std::ostringstream os;
+  const SolverResult& r = sd.result;
+  if (r.status == SolveStatus::kInfeasible)
+    os << "the contact problem at t = " << sd.t << " has no solution";
+  else if (r.status == SolveStatus::kUnresolvable)
+    os << "the contact forces at t = " << sd.t << " diverged beyond what double precision can resolve";
+  else
+    os << "the contact solve returned non-finite forces at t = " << sd.t;
+  std::vector<int> blocks = r.implicated_blocks;
+  if (blocks.empty()) {  // the largest forces
+    double worst = 0.0;
+    for (std::size_t k = 0; k + 1 < sd.problem->offsets().size(); ++k)
+      worst = std::max(worst, r.lam.segment(sd.problem->offsets()[k], sd.problem->constraints()[k].size).norm());
+    for (std::size_t k = 0; k + 1 < sd.problem->offsets().size(); ++k)
+      if (r.lam.segment(sd.problem->offsets()[k], sd.problem->constraints()[k].size).norm() >= 0.1 * worst)
+        blocks.push_back(static_cast<int>(k));
+  }
+  os << " (";
+  for (std::size_t k = 0; k < blocks.size(); ++k) os << (k ? ", " : "") << blockName(sim, sd, blocks[k]);
+  os << "): " << r.message;
+  if (r.status == SolveStatus::kInfeasible)
+    os << ". A contact on a body that cannot move (the world, a fixed joint) and starts penetrating, "
+          "or a body squeezed between contacts it cannot escape, makes the forces grow without bound.";
+  return os.str();
+}
+
 // Solve eq. 65 for the current sd.A, sd.b (scaled by `scale`: h for impulses),
 // warm-started from the previous solution of the same candidates.
 void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
@@ -464,7 +527,8 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
                                              : Constraint::spatialFriction(candidateMu(sim, i)));
     for (std::size_t a = 0; a < sim.anchors.size(); ++a) cons.push_back(Constraint::bilateral(3));
     sd.delassus = std::make_shared<DenseDelassus>(sd.A);
-    sd.problem = std::make_unique<ContactProblem>(sd.delassus, scale * sd.b, std::move(cons), 1e-6);
+    // A = W^T W is semi-definite by construction: no Cholesky check per active-set change.
+    sd.problem = std::make_unique<ContactProblem>(sd.delassus, scale * sd.b, std::move(cons), 1e-6, false);
     sd.problem_active = sd.active;
   } else {
     sd.delassus->matrix() = sd.A;
@@ -495,8 +559,12 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   }
   settings.warm_start = sim.settings.warm_start && any ? WarmStart::kGiven : WarmStart::kNone;
   solve(*sd.problem, *sd.solver, settings, sd.result, &sd.guess);
-  if (!sd.result.lam.allFinite())
-    throw std::runtime_error("contact solve returned non-finite impulses at t = " + std::to_string(sd.t));
+  // Infeasible, or forces so large that not even a loose 1e-6 could be verified: the
+  // step cannot go on. (An unreachable tolerance such as 1e-300 is also "unresolvable",
+  // with a tiny floor: that step is only recorded as unconverged.)
+  if (sd.result.status == SolveStatus::kInfeasible || !sd.result.lam.allFinite() ||
+      (sd.result.status == SolveStatus::kUnresolvable && sd.result.precision_floor > kDivergedFloor))
+    throw std::runtime_error(unsolvableMessage(sim, sd));
   // Per-candidate forces (lambda / scale) and states.
   sd.lambda = sd.result.lam / scale;
   for (int i = 0; i < sim.numCandidates(); ++i) {
@@ -581,6 +649,41 @@ void checkState(const SimulatorData& sd) {
     std::ostringstream os;
     os << "simulation diverged: non-finite state at t = " << sd.t;
     throw std::runtime_error(os.str());
+  }
+}
+
+// Physically absurd states, relative to the scene: a speed far above what gravity
+// could have given since the start (10 (|v_0| + |g| t) + 50, m/s or rad/s), or a
+// contact sinking far deeper than the activation distance and its initial depth.
+// An explicit integrator past its stability bound, or forces out of control, end here.
+void checkBlowUp(const SimulatorModel& sim, const SimulatorData& sd) {
+  const pinocchio::Model& model = sim.model;
+  const double g = model.gravity.linear().norm();
+  const double speed_limit = 10.0 * (sd.reference_speed + g * std::max(0.0, sd.t - sd.reference_time)) + 50.0;
+  Eigen::Index k = 0;
+  const double speed = model.nv > 0 ? sd.v.cwiseAbs().maxCoeff(&k) : 0.0;
+  const char* hint = sim.settings.mode == IntegrationMode::kTimeStepping
+                         ? ""
+                         : " (ODE mode: is dt small enough for delta? see rk4StableStep)";
+  if (speed > speed_limit) {
+    std::string joint = "?";
+    for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+      if (k >= model.idx_vs[j] && k < model.idx_vs[j] + model.nvs[j]) joint = model.names[j];
+    std::ostringstream os;
+    os << "simulation diverged (blow-up) at t = " << sd.t << ": velocity coordinate " << k << " (joint '" << joint
+       << "') reached " << speed << ", above the bound 10 (|v0| + |g| t) + 50 = " << speed_limit << hint;
+    throw std::runtime_error(os.str());
+  }
+  const double depth_limit =
+      std::max(0.1, 10.0 * sim.settings.activation_distance) + 10.0 * sd.reference_penetration;
+  for (int i : sd.active) {
+    if (-sd.gaps[i] > depth_limit) {
+      const std::string name = sim.slot_pair[i] < 0 ? sim.contacts[i].name : sim.pairs[sim.slot_pair[i]].name;
+      std::ostringstream os;
+      os << "simulation diverged (blow-up) at t = " << sd.t << ": contact '" << name << "' penetrates " << -sd.gaps[i]
+         << " m, deeper than the bound " << depth_limit << " m" << hint;
+      throw std::runtime_error(os.str());
+    }
   }
 }
 
@@ -697,12 +800,21 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
   if (sd.q.size() != sim.model.nq || sd.v.size() != sim.model.nv)
     throw std::invalid_argument("state size: q needs nq = " + std::to_string(sim.model.nq) +
                                 " entries and v nv = " + std::to_string(sim.model.nv));
+  const bool first = sd.reference_speed < 0.0;
+  if (first) {
+    sd.reference_speed = sim.model.nv > 0 ? sd.v.cwiseAbs().maxCoeff() : 0.0;
+    sd.reference_time = sd.t;
+    sd.reference_penetration = 0.0;
+  }
   switch (sim.settings.mode) {
     case IntegrationMode::kTimeStepping: stepTimeStepping(sim, sd); break;
     case IntegrationMode::kRK4: stepRK4(sim, sd); break;
     case IntegrationMode::kAdaptive: stepAdaptive(sim, sd); break;
   }
   checkState(sd);
+  if (first)
+    for (int i : sd.active) sd.reference_penetration = std::max(sd.reference_penetration, -sd.gaps[i]);
+  checkBlowUp(sim, sd);
   // Post-step contact velocities J v (rows t1, t2, n) per active candidate, with
   // the last Jacobian (time stepping: exactly the velocity the solve imposed).
   sd.candidate_velocity.setZero();

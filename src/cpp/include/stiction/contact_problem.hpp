@@ -20,10 +20,22 @@ namespace stiction {
 class ContactProblem {
  public:
   /// Validates everything and throws std::invalid_argument naming the fault:
-  /// sizes, non-finite entries, mu < 0 or non-finite, and an asymmetry of A
-  /// above `asymmetry_tolerance` (relative, see DelassusOperator::relativeAsymmetry).
+  /// sizes, non-finite entries, mu < 0 or non-finite, an asymmetry of A above
+  /// `asymmetry_tolerance` (relative, see DelassusOperator::relativeAsymmetry), and
+  /// an A that is not positive semi-definite (check_definiteness; see below).
   ContactProblem(std::shared_ptr<const DelassusOperator> delassus, Eigen::VectorXd b,
-                 std::vector<Constraint> constraints, double asymmetry_tolerance = 1e-9);
+                 std::vector<Constraint> constraints, double asymmetry_tolerance = 1e-9,
+                 bool check_definiteness = true);
+
+  /// A Delassus operator J M^-1 J^T is positive semi-definite; an indefinite A has no
+  /// physical meaning and sends the solvers astray (a 2 s time limit once took 224 s).
+  /// Rejected when the Cholesky factorization of its symmetric part shifted by
+  /// kIndefiniteTolerance * max diag fails, i.e. an eigenvalue is below about
+  /// -kIndefiniteTolerance * max diag. The margin admits the rounding of stored data
+  /// (FCLib's Confeti files reach -9e-8 relative). Cost: one Cholesky, ~m^3/3 flops
+  /// (docs/solvers.md: 0.1 s for KaplasTower's 1710 rows, a few % of its solve). The
+  /// simulator skips it: its A = W^T W is semi-definite by construction.
+  static constexpr double kIndefiniteTolerance = 1e-6;
 
   const DelassusOperator& delassus() const { return *delassus_; }
   const Eigen::VectorXd& b() const { return b_; }

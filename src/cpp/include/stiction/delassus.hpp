@@ -18,6 +18,9 @@ class DelassusOperator {
   virtual void multiply(const Eigen::Ref<const Eigen::VectorXd>& x,
                         Eigen::Ref<Eigen::VectorXd> y) const = 0;
 
+  /// y = |A| |x|, entrywise absolute values (the rounding bound of A x, verdict.hpp)
+  virtual void absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const = 0;
+
   /// y += A[:, offset:offset+size] dx   (Gauss-Seidel update of u = A lambda - b)
   virtual void addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,
                                    const Eigen::Ref<const Eigen::VectorXd>& dx,
@@ -41,6 +44,7 @@ class DenseDelassus final : public DelassusOperator {
   Eigen::Index rows() const override { return A_.rows(); }
   void multiply(const Eigen::Ref<const Eigen::VectorXd>& x,
                 Eigen::Ref<Eigen::VectorXd> y) const override;
+  void absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
   void addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,
                            const Eigen::Ref<const Eigen::VectorXd>& dx,
                            Eigen::Ref<Eigen::VectorXd> y) const override;

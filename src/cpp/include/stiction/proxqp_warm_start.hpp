@@ -3,6 +3,12 @@
 // where C_F replaces each spatial cone by its inscribed pyramid with F edges
 // (the LCP-style approximation of paper §4.5; it lacks the De Saxce term, so it
 // is only a starting point for the exact solvers).
+//
+// Budgets: tolerances are relative (eps_rel = settings.proxqp_tolerance, eps_abs
+// scaled to b and lambda), so a problem with ||b|| = 1e8 costs what it costs at
+// ||b|| = 1; at most settings.proxqp_max_iterations inner iterations; and, as
+// proxsuite's dense QP has no clock, the solve runs in chunks of iterations sized
+// from the measured cost per iteration to fit the time limit.
 #pragma once
 
 #include <Eigen/Core>
@@ -11,8 +17,12 @@
 
 namespace stiction {
 
-/// Writes the QP solution into lam; returns ProxQP's iteration count.
-/// Throws std::runtime_error if ProxQP reports a failure status.
-int proxqpWarmStart(const ContactProblem& problem, const SolverSettings& settings, Eigen::VectorXd& lam);
+/// Writes the QP solution (or ProxQP's last iterate, or 0) into lam and returns the
+/// stage's report (iterations: ProxQP's inner iterations). If the QP is unbounded
+/// below (b pushes along a direction of C that A does not resist: the contact
+/// problem has no solution), ProxQP's ray goes into `ray` (when given). Never throws
+/// on a solver failure: the report's outcome says what happened.
+StageReport proxqpWarmStart(const ContactProblem& problem, const SolverSettings& settings, double time_limit,
+                            Eigen::VectorXd& lam, Eigen::VectorXd* ray = nullptr);
 
 }  // namespace stiction

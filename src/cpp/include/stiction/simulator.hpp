@@ -83,7 +83,7 @@ struct PointAnchor {
 enum class IntegrationMode { kTimeStepping = 0, kRK4 = 1, kAdaptive = 2 };
 
 struct SimulatorSettings {
-  double dt = 1e-3;               ///< time step (RK4), initial/maximal step (adaptive)
+  double dt = 1e-3;               ///< time step (RK4: at most rk4StableStep(delta, zeta)), max step (adaptive)
   IntegrationMode mode = IntegrationMode::kTimeStepping;
   double delta = 0.0;             ///< ODE modes: Baumgarte time constant (eq. 64); 0 = dt
   double zeta = 0.5;              ///< ODE modes: damping ratio (eq. 64)
@@ -175,6 +175,12 @@ class SimulatorData {
   double last_dt = 0.0;  ///< the step actually taken
   double next_dt = 0.0;  ///< adaptive mode: the proposal for the next step
 
+  // Blow-up check (step()): the state when the trajectory started; set at the first
+  // step after construction or after q, v or t were assigned (reference_speed < 0).
+  double reference_speed = -1.0;        ///< ||v||_inf at the start
+  double reference_time = 0.0;
+  double reference_penetration = 0.0;   ///< deepest active penetration after the first step
+
   // coal pairs: geometry placements, results, and the contact each slot holds now
   pinocchio::GeometryData geometry_data;
   Eigen::Matrix3Xd slot_point, slot_normal, slot_t1, slot_t2;  ///< per candidate (pair slots only)
@@ -195,7 +201,14 @@ class SimulatorData {
 
 /// Advance sim_data by one step (time stepping: exactly dt; ODE modes: one
 /// RK4 step of dt, or one accepted adaptive step of at most dt).
-/// Throws std::runtime_error when the state becomes non-finite.
+/// Throws std::runtime_error naming t and the culprit when the state becomes
+/// non-finite, when it blows up (a speed above 10 (|v_0| + |g| t) + 50, or a
+/// contact penetrating deeper than max(0.1 m, 10 activation distances) + 10 times
+/// its initial depth), or when a contact problem has no solution (SolveStatus
+/// kInfeasible, e.g. a contact on something that cannot move) or forces so large
+/// that double precision cannot verify even a 1e-6 tolerance (kUnresolvable with
+/// precision_floor > 1e-6). A solve that merely misses the tolerance is recorded
+/// (all_converged_step = false), not thrown.
 void step(const SimulatorModel& sim, SimulatorData& sd);
 
 /// The contact problem (eq. 65) at the current state, for inspection and tests:

@@ -9,6 +9,7 @@
 #include <Eigen/Core>
 
 #include "stiction/contact_problem.hpp"
+#include "stiction/verdict.hpp"
 
 namespace stiction {
 
@@ -19,42 +20,51 @@ enum class WarmStart {
 };
 
 struct SolverSettings {
-  double tolerance = 1e-10;   ///< on SolverResult::relative_residual (hence also on residual)
+  double tolerance = 1e-10;   ///< on relative_residual + residual_bound (verdict.hpp)
   int max_iterations = 2000;  ///< sweeps (NSGS) / iterations (ADMM, Newton)
   WarmStart warm_start = WarmStart::kNone;
   int proxqp_facets = 8;       ///< edges of the pyramid that replaces each spatial cone
-  double proxqp_tolerance = 1e-8;
+  double proxqp_tolerance = 1e-8;  ///< relative (eps_rel), scaled to b and lambda (eps_abs)
+  int proxqp_max_iterations = 20000;  ///< ProxQP's inner iterations in all, per ProxQP run
   double admm_rho = 0.0;       ///< 0: chosen from the spectrum of A
-  double time_limit = 0.0;     ///< seconds, 0 = none; exceeding it returns converged = false
+  double time_limit = 0.0;     ///< seconds, 0 = none; covers every stage (warm start included)
 };
-
-/// Natural-map residual ||lambda - P_C(lambda - (u + E s(u)))|| with u = A lambda - b,
-/// unnormalised. Bilateral rows contribute u, unilateral rows min-map.
-double naturalMapNorm(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
-                      const Eigen::Ref<const Eigen::VectorXd>& u);
 
 /// The residual every result reports: naturalMapNorm / (1 + ||b||).
 double residual(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam);
 
-/// ||b||, or 1 when b = 0: the scale of relative_residual (Siconos divides by ||q|| = ||b||).
-/// Solvers stop on naturalMapNorm <= tolerance * stoppingScale, which is the stricter of
-/// the two measures, so a problem scaled down (tiny b and lambda) is still solved to
-/// relative accuracy instead of passing on an absolute test.
-double stoppingScale(const ContactProblem& problem);
+/// What one stage of a solve cost and how it ended (the default runs several).
+struct StageReport {
+  std::string name;        ///< "newton", "nsgs", "admm", "proxqp", "proxqp (warm start)"
+  int iterations = 0;      ///< Newton steps, sweeps, ADMM or ProxQP iterations
+  double seconds = 0.0;
+  std::string outcome;     ///< "converged", "stalled", "time limit reached", ...
+};
 
 struct SolverResult {
   Eigen::VectorXd lam;  ///< the impulse / force lambda (numRows)
   Eigen::VectorXd u;    ///< A lambda - b (numRows)
   std::vector<ContactState> states;  ///< one per block
-  int iterations = 0;
-  bool converged = false;
+  int iterations = 0;             ///< Newton steps + sweeps + ADMM iterations (ProxQP's: warm_start_*)
+  bool converged = false;         ///< status == kConverged
+  SolveStatus status = SolveStatus::kNotConverged;
   double residual = 0.0;          ///< naturalMapNorm / (1 + ||b||)
   double relative_residual = 0.0; ///< naturalMapNorm / ||b|| (Siconos' measure; >= residual)
+  double residual_bound = 0.0;    ///< rounding bound of relative_residual (verdict.hpp)
+  double precision_floor = 0.0;   ///< what rounding lambda to double alone moves relative_residual by
+  double lambda_norm = 0.0;       ///< ||lambda||, the scale the verdict had to resolve
+  double min_solution_norm = 0.0; ///< infeasible: every solution has ||lambda|| >= this (inf: none)
+  std::vector<int> implicated_blocks;  ///< infeasible / unresolvable: the blocks responsible
   double seconds = 0.0;           ///< wall time of the whole solve, warm start included
   double warm_start_seconds = 0.0;
-  int warm_start_iterations = 0;  ///< ProxQP iterations when warm_start == kProxQP
+  int warm_start_iterations = 0;  ///< ProxQP iterations, as a warm start or inside the default
+  std::vector<StageReport> stages;  ///< every stage run, in order, with its cost
   std::string solver;
-  std::string message;            ///< why it stopped
+  std::string message;            ///< the verdict, the stage that stopped and why
+
+  /// Set by the algorithms: iterates that ran away, or ProxQP's ray of unboundedness;
+  /// the verdict tests them as infeasibility certificates.
+  std::vector<Eigen::VectorXd> divergence_candidates;
 
   void resize(Eigen::Index rows, std::size_t blocks);
 };
@@ -66,9 +76,10 @@ class ContactSolver {
   virtual std::string name() const = 0;
 
   /// Iterate from result.lam (already sized and set to the initial guess) until
-  /// the residual is below settings.tolerance or the budget is spent. Must
-  /// leave result.lam, result.iterations and result.message set; the driver
-  /// computes u, the residual, the states and the converged flag itself.
+  /// the StoppingTest passes or the budget (iterations, settings.time_limit) is
+  /// spent. Must leave result.lam, result.iterations and result.message set, and
+  /// may append to result.stages; the driver computes u, the residual, the states
+  /// and the verdict itself.
   virtual void iterate(const ContactProblem& problem, const SolverSettings& settings,
                        SolverResult& result) = 0;
 };
@@ -77,8 +88,9 @@ class ContactSolver {
 std::unique_ptr<ContactSolver> makeSolver(const std::string& name);
 std::vector<std::string> solverNames();
 
-/// The driver: warm start, iterate, then the common verdict (u, residual, states,
-/// converged, seconds). `guess` is used when settings.warm_start == kGiven.
+/// The driver: infeasibility pre-check, warm start, iterate, then the common verdict
+/// (u, residual and its rounding bound, states, status, seconds; verdict.hpp).
+/// `guess` is used when settings.warm_start == kGiven. The time limit covers it all.
 void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSettings& settings,
            SolverResult& result, const Eigen::VectorXd* guess = nullptr);
 

@@ -1,0 +1,94 @@
+// Python arguments to C++ values, with errors that name the argument: TypeError
+// for the wrong kind of object (None, str, complex, a list of the wrong things),
+// ValueError for the wrong shape or range. Every binding takes bp::object and
+// converts through these, so a caller never sees Boost.Python's "did not match
+// C++ signature" text. Lists of numbers are accepted where an array is (as numpy does).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <boost/mpl/vector.hpp>
+#include <boost/python.hpp>
+#include <Eigen/Core>
+
+namespace stiction {
+namespace python {
+
+namespace bp = boost::python;
+
+/// Raise TypeError(message) (never returns).
+[[noreturn]] void raiseTypeError(const std::string& message);
+
+/// Python's repr-like short description of x's type, e.g. "str", "NoneType", "complex ndarray".
+std::string typeName(const bp::object& x);
+
+/// A real number (int, float, numpy scalar, 0-d array). bool, None, str and complex: TypeError.
+double toDouble(const bp::object& x, const std::string& name);
+/// An integer (int or numpy integer; not bool, not float).
+long toInteger(const bp::object& x, const std::string& name);
+bool toBool(const bp::object& x, const std::string& name);
+std::string toStringArg(const bp::object& x, const std::string& name);
+
+/// A 1-D real array (numpy array or a list of numbers), `expected` entries unless -1.
+Eigen::VectorXd toVector(const bp::object& x, const std::string& name, Eigen::Index expected = -1);
+/// A 2-D real array (numpy array or a list of rows).
+Eigen::MatrixXd toMatrix(const bp::object& x, const std::string& name);
+
+/// x as a C++ object of class T exposed to Python (e.g. a stiction.Constraint), or TypeError
+/// "name must be a <what>, got <type>".
+template <typename T>
+T& toObject(const bp::object& x, const std::string& name, const char* what) {
+  bp::extract<T&> e(x);
+  if (!e.check()) raiseTypeError(name + " must be a " + what + ", got " + typeName(x));
+  return e();
+}
+
+/// A value of an enum exposed with bp::enum_ (converted by value, not by reference).
+template <typename E>
+E toEnum(const bp::object& x, const std::string& name, const char* what) {
+  bp::extract<E> e(x);
+  if (!e.check()) raiseTypeError(name + " must be a " + what + ", got " + typeName(x));
+  return e();
+}
+
+/// A list or tuple of T ("name[i] must be a <what>").
+template <typename T>
+std::vector<T> toList(const bp::object& seq, const std::string& name, const char* what) {
+  if (!PyList_Check(seq.ptr()) && !PyTuple_Check(seq.ptr()))
+    raiseTypeError(name + " must be a list of " + what + ", got " + typeName(seq));
+  std::vector<T> out;
+  const long n = bp::len(seq);
+  out.reserve(n);
+  for (long i = 0; i < n; ++i) out.push_back(toObject<T>(seq[i], name + "[" + std::to_string(i) + "]", what));
+  return out;
+}
+
+/// Convert a Python value to T with the functions above (T: double, int, long, bool, std::string,
+/// Eigen::Vector3d).
+template <typename T>
+T fromPython(const bp::object& x, const std::string& name);
+
+template <> double fromPython<double>(const bp::object& x, const std::string& name);
+template <> int fromPython<int>(const bp::object& x, const std::string& name);
+template <> long fromPython<long>(const bp::object& x, const std::string& name);
+template <> unsigned long fromPython<unsigned long>(const bp::object& x, const std::string& name);
+template <> bool fromPython<bool>(const bp::object& x, const std::string& name);
+template <> std::string fromPython<std::string>(const bp::object& x, const std::string& name);
+template <> Eigen::Vector3d fromPython<Eigen::Vector3d>(const bp::object& x, const std::string& name);
+
+/// A read-write property `name` for the data member `member` of C whose setter converts
+/// through fromPython (so `settings.dt = "x"` raises TypeError naming dt).
+template <typename C, typename T, typename Class>
+void checkedMember(Class& cls, const char* name, T C::*member, const char* doc = nullptr) {
+  const std::string label = name;
+  auto get = [member](const C& c) { return c.*member; };
+  auto set = [member, label](C& c, const bp::object& x) { c.*member = fromPython<T>(x, label); };
+  cls.add_property(name, bp::make_function(get, bp::default_call_policies(), boost::mpl::vector<T, const C&>()),
+                   bp::make_function(set, bp::default_call_policies(),
+                                     boost::mpl::vector<void, C&, const bp::object&>()),
+                   doc);
+}
+
+}  // namespace python
+}  // namespace stiction
