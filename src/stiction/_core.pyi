@@ -65,6 +65,93 @@ class ContactState(int):
     names: ClassVar[dict[str, ContactState]]
     values: ClassVar[dict[int, ContactState]]
 
+class ExactLawMeasures:
+    """How far a lambda is from the exact Coulomb law (eq. 65, 73-77), part by part; see exact_law_measures and docs/exact-law.md. Per-block arrays have one entry per block (0 where a measure does not apply)."""
+    @property
+    def b_norm(self) -> float: ...
+
+    @property
+    def complementarity(self) -> numpy.ndarray: ...
+
+    @property
+    def complementarity_max(self) -> float: ...
+
+    @property
+    def complementarity_sum(self) -> float: ...
+
+    @property
+    def dissipation(self) -> numpy.ndarray: ...
+
+    @property
+    def dissipation_angle(self) -> numpy.ndarray: ...
+
+    @property
+    def dissipation_angle_max(self) -> float: ...
+
+    @property
+    def dissipation_max(self) -> float: ...
+
+    @property
+    def dual(self) -> numpy.ndarray: ...
+
+    @property
+    def dual_max(self) -> float: ...
+
+    @property
+    def dual_norm(self) -> float: ...
+
+    @property
+    def lambda_norm(self) -> float: ...
+
+    @property
+    def liftoff(self) -> numpy.ndarray: ...
+
+    @property
+    def liftoff_max(self) -> float: ...
+
+    @property
+    def natural_map(self) -> float: ...
+
+    @property
+    def num_sliding(self) -> int: ...
+
+    @property
+    def primal(self) -> numpy.ndarray: ...
+
+    @property
+    def primal_max(self) -> float: ...
+
+    @property
+    def primal_norm(self) -> float: ...
+
+    @property
+    def relative_residual(self) -> float: ...
+
+    @property
+    def residual(self) -> float: ...
+
+    @property
+    def signorini(self) -> numpy.ndarray: ...
+
+    @property
+    def signorini_max(self) -> float: ...
+
+    @property
+    def sliding(self) -> Any: ...
+
+    @property
+    def speed_floor(self) -> float: ...
+
+    @property
+    def states(self) -> list: ...
+
+    @property
+    def u(self) -> numpy.ndarray: ...
+
+    @property
+    def w(self) -> numpy.ndarray: ...
+
+
 class GeometryPairContact:
     """A collision pair of the GeometryModel handled by coal (general shapes)."""
     def __init__(self) -> None: ...
@@ -347,6 +434,9 @@ class WarmStart(int):
 
 def build_contact_problem(sim: Any, data: Any, q: Any, v: Any, delta: Any, zeta: Any) -> None:
     """fill data.J, A, b (eq. 27), drift, position_error and active at (q, v)"""
+
+def exact_law_measures(problem: Any, lam: Any, relative_speed_floor: Any = ...) -> ExactLawMeasures:
+    """How far lam is from the exact Coulomb law, part by part (ExactLawMeasures): natural map, primal and dual feasibility, complementarity, Signorini, maximum dissipation and lift-off of sliding blocks."""
 
 def residual(problem: Any, lam: Any) -> float:
     """natural-map residual of the De Saxce problem / (1 + ||b||)"""

@@ -1,8 +1,11 @@
+#include <cstdio>
+
 #include <boost/python.hpp>
 #include <eigenpy/eigenpy.hpp>
 
 #include "convert.hpp"
 #include "expose.hpp"
+#include "stiction/exact_law.hpp"
 #include "stiction/solver.hpp"
 
 namespace bp = boost::python;
@@ -72,6 +75,38 @@ double residualOf(const bp::object& problem, const bp::object& lam) {
   return residual(p, toVector(lam, "residual: lam", p.numRows()));
 }
 
+ExactLawMeasures exactLawOf(const bp::object& problem, const bp::object& lam, const bp::object& floor) {
+  const ContactProblem& p =
+      toObject<ContactProblem>(problem, "exact_law_measures: problem", "stiction.ContactProblem");
+  const Eigen::VectorXd l = toVector(lam, "exact_law_measures: lam", p.numRows());
+  const double f = toDouble(floor, "exact_law_measures: relative_speed_floor");
+  return exactLawMeasures(p, l, f);
+}
+template <Eigen::VectorXd ExactLawMeasures::*member>
+Eigen::VectorXd vectorOf(const ExactLawMeasures& e) {
+  return e.*member;
+}
+bp::list lawStatesOf(const ExactLawMeasures& e) {
+  bp::list out;
+  for (ContactState s : e.states) out.append(s);
+  return out;
+}
+bp::object slidingOf(const ExactLawMeasures& e) {
+  bp::list out;
+  for (bool s : e.sliding) out.append(s);
+  return bp::import("numpy").attr("array")(out, "bool");
+}
+std::string lawRepr(const ExactLawMeasures& e) {
+  char buf[400];
+  std::snprintf(buf, sizeof buf,
+                "ExactLawMeasures(relative_residual=%.3g, primal_max=%.3g, dual_max=%.3g, "
+                "complementarity_max=%.3g, dissipation_max=%.3g, dissipation_angle_max=%.3g, "
+                "liftoff_max=%.3g, %d sliding of %zu blocks)",
+                e.relative_residual, e.primal_max, e.dual_max, e.complementarity_max, e.dissipation_max,
+                e.dissipation_angle_max, e.liftoff_max, e.num_sliding, e.sliding.size());
+  return buf;
+}
+
 }  // namespace
 
 void exposeSolver() {
@@ -139,6 +174,59 @@ void exposeSolver() {
       .add_property("name", &Solver::name)
       .def("solve", &Solver::solveWith,
            (bp::arg("problem"), bp::arg("settings"), bp::arg("guess") = bp::object()));
+
+  bp::class_<ExactLawMeasures>(
+      "ExactLawMeasures",
+      "How far a lambda is from the exact Coulomb law (eq. 65, 73-77), part by part; "
+      "see exact_law_measures and docs/exact-law.md. Per-block arrays have one entry per block "
+      "(0 where a measure does not apply).",
+      bp::no_init)
+      .def_readonly("b_norm", &ExactLawMeasures::b_norm, "norm(b)")
+      .def_readonly("lambda_norm", &ExactLawMeasures::lambda_norm, "norm(lambda)")
+      .def_readonly("speed_floor", &ExactLawMeasures::speed_floor,
+                    "relative_speed_floor * max(abs(b)): a block slides when norm(u_t) exceeds it (and lambda_n > 0)")
+      .def_readonly("natural_map", &ExactLawMeasures::natural_map,
+                    "norm(lambda - P_C(lambda - (u + E s(u)))), absolute")
+      .def_readonly("residual", &ExactLawMeasures::residual, "natural map / (1 + norm(b))")
+      .def_readonly("relative_residual", &ExactLawMeasures::relative_residual, "natural map / norm(b) (/ 1 if b = 0)")
+      .def_readonly("primal_max", &ExactLawMeasures::primal_max, "max over blocks of dist(lambda_i, C_i)")
+      .def_readonly("primal_norm", &ExactLawMeasures::primal_norm, "2-norm over blocks of dist(lambda_i, C_i)")
+      .def_readonly("dual_max", &ExactLawMeasures::dual_max, "max over blocks of dist(w_i, C_i*), w = u + E s(u)")
+      .def_readonly("dual_norm", &ExactLawMeasures::dual_norm, "2-norm over blocks of dist(w_i, C_i*)")
+      .def_readonly("complementarity_max", &ExactLawMeasures::complementarity_max,
+                    "max over blocks of abs(<lambda_i, w_i>)")
+      .def_readonly("complementarity_sum", &ExactLawMeasures::complementarity_sum,
+                    "sum over blocks of abs(<lambda_i, w_i>)")
+      .def_readonly("signorini_max", &ExactLawMeasures::signorini_max, "max of abs(lambda_n u_n)")
+      .def_readonly("dissipation_max", &ExactLawMeasures::dissipation_max,
+                    "sliding blocks: max of norm(lambda_t + mu lambda_n u_t / norm(u_t))")
+      .def_readonly("dissipation_angle_max", &ExactLawMeasures::dissipation_angle_max,
+                    "sliding blocks: max angle between lambda_t and -u_t, radians")
+      .def_readonly("liftoff_max", &ExactLawMeasures::liftoff_max,
+                    "sliding blocks: max u_n, signed (exact law: 0; CCP: mu norm(u_t)); 0 when none slides")
+      .def_readonly("num_sliding", &ExactLawMeasures::num_sliding)
+      .add_property("primal", &vectorOf<&ExactLawMeasures::primal>, "per block: dist(lambda_i, C_i)")
+      .add_property("dual", &vectorOf<&ExactLawMeasures::dual>,
+                    "per block: dist(w_i, C_i*) (bilateral: norm(u_i))")
+      .add_property("complementarity", &vectorOf<&ExactLawMeasures::complementarity>,
+                    "per block: abs(<lambda_i, w_i>)")
+      .add_property("signorini", &vectorOf<&ExactLawMeasures::signorini>, "per block: abs(lambda_n u_n)")
+      .add_property("dissipation", &vectorOf<&ExactLawMeasures::dissipation>,
+                    "per sliding block: norm(lambda_t + mu lambda_n u_t / norm(u_t))")
+      .add_property("dissipation_angle", &vectorOf<&ExactLawMeasures::dissipation_angle>,
+                    "per sliding block: angle(lambda_t, -u_t), radians")
+      .add_property("liftoff", &vectorOf<&ExactLawMeasures::liftoff>, "per sliding block: u_n")
+      .add_property("sliding", &slidingOf, "per block (bool array): norm(u_t) > speed_floor and lambda_n > 0")
+      .add_property("states", &lawStatesOf, "ContactState per block (as SolverResult.states)")
+      .add_property("u", &vectorOf<&ExactLawMeasures::u>, "A lambda - b (num_rows)")
+      .add_property("w", &vectorOf<&ExactLawMeasures::w>, "u + E s(u) (num_rows)")
+      .def("__repr__", &lawRepr);
+
+  bp::def("exact_law_measures", &exactLawOf,
+          (bp::arg("problem"), bp::arg("lam"), bp::arg("relative_speed_floor") = kRelativeSpeedFloor),
+          "How far lam is from the exact Coulomb law, part by part (ExactLawMeasures): natural map, "
+          "primal and dual feasibility, complementarity, Signorini, maximum dissipation and lift-off "
+          "of sliding blocks.");
 
   bp::def("solver_names", &names);
   bp::def("residual", &residualOf, (bp::arg("problem"), bp::arg("lam")),

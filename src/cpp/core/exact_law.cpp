@@ -1,0 +1,140 @@
+// The exact-law measures (exact_law.hpp, docs/exact-law.md).
+#include "stiction/exact_law.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "stiction/cone.hpp"
+#include "stiction/solver.hpp"   // classifyStates
+#include "stiction/verdict.hpp"  // naturalMapNorm, stoppingScale
+
+namespace stiction {
+
+namespace {
+
+// Distance of (x_t, x_n), x_t given by its norm, to the friction cone ||x_t|| <= mu x_n (eq. 58),
+// by the closed-form projection of cone.hpp (eq. 66).
+double distanceToCone(double xt_norm, double xn, double mu) {
+  double scale, n;
+  projectOntoConeScalars(xt_norm, xn, mu, scale, n);
+  return norm2((1.0 - scale) * xt_norm, xn - n);
+}
+
+// Distance of (w_t, w_n) to the dual cone C* = {mu ||w_t|| <= w_n}: by Moreau's decomposition
+// w = P_C*(w) + P_(C*)°(w) and (C*)° = -C, so dist(w, C*) = ||P_-C(w)|| = ||P_C(-w)||.
+double distanceToDualCone(double wt_norm, double wn, double mu) {
+  double scale, n;
+  projectOntoConeScalars(wt_norm, -wn, mu, scale, n);
+  return norm2(scale * wt_norm, n);
+}
+
+}  // namespace
+
+void measureExactLaw(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
+                     ExactLawMeasures& out, double relative_speed_floor) {
+  const Eigen::Index m = problem.numRows();
+  if (lam.size() != m)
+    throw std::invalid_argument("exact_law_measures: lambda has " + std::to_string(lam.size()) +
+                                " entries, the problem has " + std::to_string(m) + " rows");
+  if (!(relative_speed_floor >= 0.0) || !std::isfinite(relative_speed_floor))
+    throw std::invalid_argument("exact_law_measures: relative_speed_floor must be finite and >= 0, got " +
+                                std::to_string(relative_speed_floor));
+  const auto& cons = problem.constraints();
+  const auto& off = problem.offsets();
+  const std::size_t nb = cons.size();
+  const Eigen::Index nbi = static_cast<Eigen::Index>(nb);
+
+  // u = A lambda - b (eq. 27), then the natural map exactly as every SolverResult reports it.
+  out.u.resize(m);
+  problem.delassus().multiply(lam, out.u);
+  out.u -= problem.b();
+  out.b_norm = problem.b().norm();
+  out.lambda_norm = lam.norm();
+  out.natural_map = naturalMapNorm(problem, lam, out.u);
+  out.residual = out.natural_map / (1.0 + out.b_norm);
+  out.relative_residual = out.natural_map / stoppingScale(problem);
+  // The speed floor of "sliding", scale-aware like classifyStates: relative to ||b||_inf.
+  out.speed_floor = relative_speed_floor * problem.b().lpNorm<Eigen::Infinity>();
+  classifyStates(problem, lam, out.u, out.states);
+
+  for (Eigen::VectorXd* v : {&out.primal, &out.dual, &out.complementarity, &out.signorini, &out.dissipation,
+                             &out.dissipation_angle, &out.liftoff})
+    v->setZero(nbi);
+  out.sliding.assign(nb, false);
+  out.w = out.u;
+  out.num_sliding = 0;
+  out.liftoff_max = 0.0;
+  bool any_sliding = false;
+
+  for (std::size_t i = 0; i < nb; ++i) {
+    const Eigen::Index o = off[i];
+    const int k = cons[i].size;
+    const auto l = lam.segment(o, k);
+    const auto u = out.u.segment(o, k);
+    auto w = out.w.segment(o, k);
+    if (cons[i].kind == ConstraintKind::kBilateral) {
+      // C = R^k, C* = {0} (eq. 14-15): lambda is free, w = u must vanish.
+      out.dual[i] = u.norm();
+      out.complementarity[i] = std::abs(l.dot(u));
+      continue;
+    }
+    const Eigen::Index n = k - 1;  // normal row last
+    if (cons[i].kind == ConstraintKind::kUnilateral) {
+      // C = C* = R+ (eq. 43): lambda_n >= 0, u_n >= 0, lambda_n u_n = 0.
+      out.primal[i] = std::max(0.0, -l[n]);
+      out.dual[i] = std::max(0.0, -u[n]);
+      out.complementarity[i] = out.signorini[i] = std::abs(l[n] * u[n]);
+      continue;
+    }
+    // Friction block (t, n) or (t1, t2, n).
+    const double mu = cons[i].mu;
+    const double ut = k == 3 ? norm2(u[0], u[1]) : std::abs(u[0]);
+    const double lt = k == 3 ? norm2(l[0], l[1]) : std::abs(l[0]);
+    w[n] += mu * ut;  // De Saxce: w = u + E s(u), s = mu ||u_t|| (eq. 76-77)
+    out.primal[i] = distanceToCone(lt, l[n], mu);
+    out.dual[i] = distanceToDualCone(ut, w[n], mu);  // w_t = u_t
+    out.complementarity[i] = std::abs(l.dot(w));     // eq. 75
+    out.signorini[i] = std::abs(l[n] * u[n]);
+    if (!(ut > out.speed_floor && l[n] > 0.0)) continue;
+    // Sliding: maximum dissipation wants lambda_t = -mu lambda_n u_t / ||u_t|| (eq. 58, 66).
+    out.sliding[i] = true;
+    ++out.num_sliding;
+    const double c = mu * l[n] / ut;
+    double dot, cross;  // of lambda_t with -u_t
+    if (k == 3) {
+      out.dissipation[i] = norm2(l[0] + c * u[0], l[1] + c * u[1]);
+      dot = -(l[0] * u[0] + l[1] * u[1]);
+      cross = std::abs(l[0] * u[1] - l[1] * u[0]);
+    } else {
+      out.dissipation[i] = std::abs(l[0] + c * u[0]);
+      dot = -l[0] * u[0];
+      cross = 0.0;
+    }
+    out.dissipation_angle[i] = lt > 0.0 ? std::atan2(cross, dot) : 0.0;  // in [0, pi]
+    out.liftoff[i] = u[n];  // exact: 0 (<lambda, w> = lambda_n u_n); CCP: mu ||u_t||
+    out.liftoff_max = any_sliding ? std::max(out.liftoff_max, u[n]) : u[n];
+    any_sliding = true;
+  }
+
+  auto maxOf = [nbi](const Eigen::VectorXd& v) { return nbi > 0 ? v.maxCoeff() : 0.0; };
+  out.primal_max = maxOf(out.primal);
+  out.primal_norm = out.primal.norm();
+  out.dual_max = maxOf(out.dual);
+  out.dual_norm = out.dual.norm();
+  out.complementarity_max = maxOf(out.complementarity);
+  out.complementarity_sum = out.complementarity.sum();
+  out.signorini_max = maxOf(out.signorini);
+  out.dissipation_max = maxOf(out.dissipation);
+  out.dissipation_angle_max = maxOf(out.dissipation_angle);
+}
+
+ExactLawMeasures exactLawMeasures(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
+                                  double relative_speed_floor) {
+  ExactLawMeasures out;
+  measureExactLaw(problem, lam, out, relative_speed_floor);
+  return out;
+}
+
+}  // namespace stiction
