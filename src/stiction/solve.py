@@ -39,6 +39,8 @@ def _as_float_array(x, name: str, ndim: int) -> np.ndarray:
 
 def _real(x, name: str) -> float:
     """A real number: int, float or a numpy real scalar; not bool, None, str or complex."""
+    if type(x) is float or type(x) is int:  # the common case, checked first (solve() is called per step)
+        return float(x)
     if not isinstance(x, (bool, np.bool_)):
         if isinstance(x, (numbers.Real, np.floating, np.integer)):
             return float(x)
@@ -48,6 +50,8 @@ def _real(x, name: str) -> float:
 
 
 def _integer(x, name: str) -> int:
+    if type(x) is int:
+        return x
     if isinstance(x, (bool, np.bool_)) or not isinstance(x, (numbers.Integral, np.integer)):
         raise TypeError(f"{name} must be an integer, got {_type_name(x)}"
                         + (f" {x!r}" if isinstance(x, float) else ""))
@@ -93,7 +97,7 @@ def solve(
         raise TypeError(f"solve: problem must be a stiction.ContactProblem, got {_type_name(problem)}")
     if not isinstance(solver, str):
         raise TypeError(f"solve: solver must be a name (str), got {_type_name(solver)}")
-    if solver not in solver_names():
+    if solver not in _solvers and solver not in solver_names():
         raise ValueError(f"unknown solver '{solver}' (known: {', '.join(solver_names())})")
     tol = _real(tol, "solve: tol")
     if not (tol > 0 and math.isfinite(tol)):
@@ -104,23 +108,40 @@ def solve(
     time_limit = _real(time_limit, "solve: time_limit")
     if not (time_limit >= 0 and math.isfinite(time_limit)):
         raise ValueError(f"solve: time_limit must be a finite number of seconds >= 0 (0: none), got {time_limit}")
-    settings = SolverSettings()
-    settings.tolerance = tol
-    settings.max_iterations = max_iter
-    settings.time_limit = time_limit
     guess = None
     if warm_start is None:
-        settings.warm_start = WarmStart.none
+        start = WarmStart.none
     elif isinstance(warm_start, str):
         if warm_start != "proxqp":
             raise ValueError(f"solve: warm_start must be None, 'proxqp' or an array, got {warm_start!r}")
-        settings.warm_start = WarmStart.proxqp
+        start = WarmStart.proxqp
     else:
         guess = _as_float_array(warm_start, "solve: warm_start (initial lambda)", 1)
         if guess.shape[0] != problem.num_rows:
             raise ValueError(f"solve: warm_start: initial lambda has {guess.shape[0]} entries, "
                              f"the problem has {problem.num_rows} rows")
-        settings.warm_start = WarmStart.given
+        start = WarmStart.given
+    settings = _settings(tol, max_iter, time_limit, start)
     if solver not in _solvers:
         _solvers[solver] = Solver(solver)
     return _solvers[solver].solve(problem, settings, guess)
+
+
+_settings_cache: dict[tuple, SolverSettings] = {}
+
+
+def _settings(tol: float, max_iter: int, time_limit: float, start) -> SolverSettings:
+    """SolverSettings for these values, built once and reused (the C++ solve takes a copy; building
+    and filling one through the bindings costs ~5 µs, as much as solving a small problem)."""
+    key = (tol, max_iter, time_limit, int(start))
+    settings = _settings_cache.get(key)
+    if settings is None:
+        if len(_settings_cache) > 256:
+            _settings_cache.clear()
+        settings = SolverSettings()
+        settings.tolerance = tol
+        settings.max_iterations = max_iter
+        settings.time_limit = time_limit
+        settings.warm_start = start
+        _settings_cache[key] = settings
+    return settings
