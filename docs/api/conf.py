@@ -32,7 +32,9 @@ def _plain_core_docstrings(app, what, name, obj, options, lines):
     """The compiled core's docstrings are plain text (Boost.Python), not reST: escape the
     characters reST would read as markup (|x| as a substitution, *x* as emphasis)."""
     module = getattr(obj, "__module__", "") or ""
-    if module.startswith("stiction._core") or "Boost.Python" in type(obj).__name__:
+    fget = obj.fget if isinstance(obj, property) else None
+    if (module.startswith("stiction._core") or "Boost.Python" in repr(type(obj))
+            or (fget is not None and "Boost.Python" in repr(type(fget)))):
         lines[:] = [line.replace("\\", "\\\\").replace("|", "\\|").replace("*", "\\*") for line in lines]
 
 

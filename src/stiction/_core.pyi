@@ -31,6 +31,13 @@ class ConstraintKind(int):
     names: ClassVar[dict[str, ConstraintKind]]
     values: ClassVar[dict[int, ConstraintKind]]
 
+class ContactModel(int):
+    frictionless: ClassVar[ContactModel]
+    planar: ClassVar[ContactModel]
+    spatial: ClassVar[ContactModel]
+    names: ClassVar[dict[str, ContactModel]]
+    values: ClassVar[dict[int, ContactModel]]
+
 class ContactProblem:
     """A lambda - b in -lim N_C^{U_eps}(lambda) (eq. 65): Delassus operator A, right-hand side b, and the list of constraint blocks. Raises ValueError on inconsistent input (sizes, NaN, mu < 0, an asymmetric or indefinite A) and TypeError on the wrong kind of argument."""
     @property
@@ -156,6 +163,7 @@ class GeometryPairContact:
     """A collision pair of the GeometryModel handled by coal (general shapes)."""
     def __init__(self) -> None: ...
     max_contacts: int
+    model: ContactModel
     mu: float
     name: str
     pair: int
@@ -251,6 +259,9 @@ class SimulatorData:
 
     @property
     def rhs_evaluations(self) -> int: ...
+
+    @property
+    def rows(self) -> numpy.ndarray: ...
 
     @property
     def states(self) -> list: ...
@@ -404,6 +415,7 @@ class SphereContact:
     def __init__(self) -> None: ...
     frame: int
     halfspace: int
+    model: ContactModel
     mu: float
     name: str
     offset: numpy.ndarray

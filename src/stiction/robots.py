@@ -17,6 +17,10 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+# The placement of a planar root joint: joint (x, y, z) -> world (x, z, -y), i.e. the joint's
+# plane is the world's vertical x-z plane and its rotation is about world -y.
+PLANAR_ROTATION = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
 
 @dataclass(frozen=True)
 class RobotSpec:
@@ -78,16 +82,22 @@ def robot_package_dirs() -> list[str]:
 
 def load_urdf(path: str | os.PathLike, free_flyer: bool, package_dirs: list[str] | None = None,
               srdf: str | os.PathLike | None = None, reference: str | None = None, name: str | None = None,
-              spec: RobotSpec | None = None) -> LoadedRobot:
+              spec: RobotSpec | None = None, planar: bool = False) -> LoadedRobot:
+    """planar: a planar root joint (instead of the free flyer) placed in the world's vertical x-z plane:
+    Pinocchio's JointModelPlanar moves in its x-y plane and turns about its z; its placement (a
+    rotation of +90 degrees about x) maps joint x to world x, joint y to world z (up) and joint z to
+    world -y, so the ground z = 0, gravity and slopes of a scene stay as they are."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"URDF not found: {path}")
     dirs = [str(p) for p in (package_dirs or [])]
-    root = pin.JointModelFreeFlyer() if free_flyer else None
+    root = pin.JointModelPlanar() if planar else pin.JointModelFreeFlyer() if free_flyer else None
     if root is None:
         model = pin.buildModelFromUrdf(str(path))
     else:
         model = pin.buildModelFromUrdf(str(path), root)
+    if planar:
+        model.jointPlacements[1] = pin.SE3(PLANAR_ROTATION, np.zeros(3))
     visual = pin.buildGeomFromUrdf(model, str(path), pin.GeometryType.VISUAL, package_dirs=dirs)
     q0 = pin.neutral(model)
     if srdf is not None and reference is not None:

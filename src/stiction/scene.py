@@ -125,13 +125,17 @@ def _halfspace(name: str, normal, offset: float, frame: int = 0) -> _core.HalfSp
     return h
 
 
-def _sphere(name: str, frame: int, offset, radius: float, halfspace: int, mu: float) -> _core.SphereContact:
+def _sphere(name: str, frame: int, offset, radius: float, halfspace: int, mu: float,
+            model: str = "spatial") -> _core.SphereContact:
     c = _core.SphereContact()
     c.name, c.frame, c.offset, c.radius, c.halfspace, c.mu = name, int(frame), np.asarray(offset, float), float(radius), int(halfspace), float(mu)
+    c.model = getattr(_core.ContactModel, model)
     return c
 
 
-def _corners(half: np.ndarray, z_sign: float | None = None):
+def _corners(half: np.ndarray, z_sign: float | None = None, planar: bool = False):
+    if planar:  # the box's outline in the planar joint's x-y plane (z = 0)
+        return [np.array([sx * half[0], sy * half[1], 0.0]) for sx in (-1, 1) for sy in (-1, 1)]
     out = []
     for sx in (-1, 1):
         for sy in (-1, 1):
@@ -171,21 +175,24 @@ def load_scene(name_or_path: str | os.PathLike) -> Scene:
 
 
 def _quaternion_check(model: pin.Model, q: np.ndarray, field: str, strict: bool = True) -> np.ndarray:
-    """Normalise the quaternions of free-flyer and spherical joints in q; a zero quaternion (with
-    `strict`, one whose norm is not within 10 % of 1: likely a typo in a scene file) is an error
-    naming the joint."""
+    """Normalise the quaternions of free-flyer and spherical joints and the (cos θ, sin θ) pair
+    of planar joints in q; a zero one (with `strict`, one whose norm is not within 10 % of 1:
+    likely a typo in a scene file) is an error naming the joint."""
     q = q.copy()
     for j in range(1, model.njoints):
         kind = model.joints[j].shortname()
-        start = {"JointModelFreeFlyer": 3, "JointModelSpherical": 0}.get(kind)
+        start, size = {"JointModelFreeFlyer": (3, 4), "JointModelSpherical": (0, 4),
+                       "JointModelPlanar": (2, 2)}.get(kind, (None, 0))
         if start is None:
             continue
         i = model.joints[j].idx_q + start
-        norm = float(np.linalg.norm(q[i:i + 4]))
+        norm = float(np.linalg.norm(q[i:i + size]))
         if not (0.9 < norm < 1.1 if strict else norm > 1e-12):
-            raise SceneError(f"{field}: the quaternion of joint {model.names[j]!r} (entries {i}..{i + 3}) has "
-                             f"norm {norm:g}; give a unit quaternion (x, y, z, w)")
-        q[i:i + 4] /= norm
+            what = "quaternion" if size == 4 else "(cos, sin) pair"
+            hint = "a unit quaternion (x, y, z, w)" if size == 4 else "cos and sin of the angle"
+            raise SceneError(f"{field}: the {what} of joint {model.names[j]!r} (entries {i}..{i + size - 1}) has "
+                             f"norm {norm:g}; give {hint}")
+        q[i:i + size] /= norm
     return q
 
 
@@ -206,6 +213,8 @@ def build_scene(cfg: dict, default_name: str = "scene", source: str | None = Non
 def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
     ground, contacts_cfg, control, initial = cfg["ground"], cfg["contacts"], cfg["control"], cfg["initial"]
     slope_deg, mu = ground["slope_deg"], ground["mu"]
+    cmodel = contacts_cfg["model"]
+    root = cfg["joint"] or ("free_flyer" if cfg["free_flyer"] else "fixed")
 
     halfspaces = [_halfspace("ground", (0, 0, 1), 0.0)]
     contacts: list = []
@@ -222,7 +231,7 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             robot = load_robot(cfg["robot"])
         else:
             urdf_path = _resolve(cfg["urdf"], base_dir)
-            robot = load_urdf(urdf_path, cfg["free_flyer"], _package_dirs(urdf_path))
+            robot = load_urdf(urdf_path, root == "free_flyer", _package_dirs(urdf_path), planar=root == "planar")
         model, visual, q0 = robot.model, robot.visual_model, robot.q0.copy()
         spec = robot.spec
         if initial["q"] is not None:
@@ -234,32 +243,33 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             # A rigid robot: every joint but the free flyer held at its initial value.
             lock = list(range(2, model.njoints))
             model, visual = pin.buildReducedModel(model, visual, lock, q0)
-            q0 = q0[:7].copy()
+            q0 = q0[:model.nq].copy()  # the root joint's coordinates come first
         feet = contacts_cfg["feet"] if contacts_cfg["feet"] is not None else (spec is not None and bool(spec.feet))
         if feet:
             if spec is None or not spec.feet:
                 raise SceneError("contacts.feet = true: this robot has no foot frames; list them with contacts.frames")
             radius = contacts_cfg["radius"] if contacts_cfg["radius"] is not None else spec.foot_radius
             for f in spec.feet:
-                contacts.append(_sphere(f, model.getFrameId(f), (0, 0, 0), radius, 0, mu))
+                contacts.append(_sphere(f, model.getFrameId(f), (0, 0, 0), radius, 0, mu, cmodel))
         for frame_name in contacts_cfg["frames"]:
             contacts.append(_sphere(frame_name, _frame_id(model, frame_name, "contacts.frames"), (0, 0, 0),
-                                    contacts_cfg["radius"] or 0.0, 0, mu))
+                                    contacts_cfg["radius"] or 0.0, 0, mu, cmodel))
         if spec is not None and spec.points and contacts_cfg["soles"]:
             for frame_name, offset in spec.points:
-                contacts.append(_sphere(f"{frame_name}{offset}", model.getFrameId(frame_name), offset, 0.0, 0, mu))
+                contacts.append(_sphere(f"{frame_name}{offset}", model.getFrameId(frame_name), offset, 0.0, 0, mu,
+                                        cmodel))
         if contacts_cfg["box_corners"]:
             half = _box_half_extents(visual)
             if half is None:
                 raise SceneError("contacts.box_corners = true: the URDF has no box visual")
             body_frame = next(i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY)
-            for k, corner in enumerate(_corners(half)):
-                contacts.append(_sphere(f"corner{k}", body_frame, corner, 0.0, 0, mu))
+            for k, corner in enumerate(_corners(half, planar=root == "planar")):
+                contacts.append(_sphere(f"corner{k}", body_frame, corner, 0.0, 0, mu, cmodel))
     else:
         for key in ("feet", "radius"):
             if contacts_cfg[key] is not None:
                 raise SceneError(f"contacts.{key}: `bodies` scenes use their box corners")
-        model, visual, q0, contacts, halfspaces = _stacked_bodies(cfg["bodies"], mu, halfspaces, base_dir)
+        model, visual, q0, contacts, halfspaces = _stacked_bodies(cfg["bodies"], mu, halfspaces, base_dir, cmodel)
 
     for w, wall in enumerate(cfg["walls"]):
         name = wall["name"] or f"wall{len(halfspaces)}"
@@ -267,7 +277,8 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
         for frame_name in wall["frames"]:
             fid = _frame_id(model, frame_name, f"walls[{w}].frames")
             contacts.append(_sphere(f"{frame_name}-{name}", fid, wall["offset_in_frame"], wall["radius"],
-                                    len(halfspaces) - 1, mu if wall["mu"] is None else wall["mu"]))
+                                    len(halfspaces) - 1, mu if wall["mu"] is None else wall["mu"],
+                                    cmodel if wall["model"] is None else wall["model"]))
 
     geometry, pairs = None, []
     if cfg["collision"]["pairs"] is not None:
@@ -296,10 +307,14 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
     model.gravity = pin.Motion(np.array([GRAVITY * math.sin(th), 0.0, -GRAVITY * math.cos(th)]), np.zeros(3))
 
     free = model.joints[1].shortname() == "JointModelFreeFlyer" if model.njoints > 1 else False
+    planar = model.njoints > 1 and model.joints[1].shortname() == "JointModelPlanar"
     bodies = cfg["bodies"] is not None
     for key in ("base_velocity", "base_xy"):
         if initial[key] is not None and not free:
-            raise SceneError(f"initial.{key}: the model has no free-flyer base")
+            raise SceneError(f"initial.{key}: the model has no free-flyer base" +
+                             (" (planar joint: initial.planar_velocity)" if planar else ""))
+    if initial["planar_velocity"] is not None and not planar:
+        raise SceneError("initial.planar_velocity: the model has no planar root joint (joint = \"planar\")")
     if initial["top_velocity"] is not None and not bodies:
         raise SceneError("initial.top_velocity applies to `bodies` scenes only")
     v0 = np.zeros(model.nv)
@@ -327,21 +342,34 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             v0[-6:] = initial["top_velocity"]
         if initial["base_velocity"] is not None:
             v0[:6] = initial["base_velocity"]
+    elif planar and not anchors:
+        if initial["q"] is None:  # lower (or raise) the body so its lowest contact touches z = 0, plus `drop`
+            data = model.createData()
+            pin.framesForwardKinematics(model, data, q0)
+            lowest = min((data.oMf[c.frame].act(c.offset)[2] - c.radius for c in contacts if c.halfspace == 0),
+                         default=math.inf)
+            if math.isfinite(lowest):
+                q0[1] += -lowest + initial["drop"]  # joint y = world z
+        if initial["planar_velocity"] is not None:
+            v0[:3] = initial["planar_velocity"]
     elif initial["base_velocity"] is not None:
         v0[:6] = initial["base_velocity"]
+    elif planar and initial["planar_velocity"] is not None:
+        v0[:3] = initial["planar_velocity"]
 
     kp = np.zeros(model.nv)
     kd = np.zeros(model.nv)
-    start = 6 if free else 0
+    start = 6 if free else 3 if planar else 0
+    root_nq = 7 if free else 4 if planar else 0
     kp[start:] = control["kp"]
     kd[start:] = control["kd"]
     q_target = q0.copy()
     if control["q_target"] is not None:
         joints = np.asarray(control["q_target"], dtype=float)
-        if joints.shape != (model.nq - (7 if free else 0),):
-            raise SceneError(f"control.q_target needs the {model.nq - (7 if free else 0)} joint positions, "
+        if joints.shape != (model.nq - root_nq,):
+            raise SceneError(f"control.q_target needs the {model.nq - root_nq} joint positions, "
                              f"got {joints.shape[0]}")
-        q_target[(7 if free else 0):] = joints
+        q_target[root_nq:] = joints
     tau_ff = np.zeros(model.nv)
     if control["gravity_feedforward"]:
         tau_ff = pin.computeGeneralizedGravity(model, model.createData(), q_target).copy()
@@ -400,6 +428,7 @@ def _collision_pairs(cfg: dict, model: pin.Model, mu: float, urdf_path: Path | N
         gp = _core.GeometryPairContact()
         gp.name, gp.pair = f"{a}|{b}", len(geometry.collisionPairs) - 1
         gp.mu, gp.max_contacts = mu if col["mu"] is None else col["mu"], col["max_contacts"]
+        gp.model = getattr(_core.ContactModel, col["model"])
         pairs.append(gp)
     return geometry, pairs
 
@@ -483,7 +512,7 @@ def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = 
                  slope_deg=slope_deg, mu=mu, geometry=geometry, pairs=pair_list)
 
 
-def _stacked_bodies(paths: list[str], mu: float, halfspaces: list, base_dir=None):
+def _stacked_bodies(paths: list[str], mu: float, halfspaces: list, base_dir=None, cmodel: str = "spatial"):
     """Free-flying URDF boxes stacked on the ground in the listed order: each box's
     bottom corners touch the ground (the first) or the top face of the box below."""
     model = pin.Model()
@@ -515,7 +544,7 @@ def _stacked_bodies(paths: list[str], mu: float, halfspaces: list, base_dir=None
             halfspaces.append(_halfspace(f"top of body{k - 1}", (0, 0, 1), float(below_half[2]), below_frame))
             target = len(halfspaces) - 1
         for c, corner in enumerate(_corners(half, z_sign=-1)):
-            contacts.append(_sphere(f"body{k}-corner{c}", body_frame, corner, 0.0, target, mu))
+            contacts.append(_sphere(f"body{k}-corner{c}", body_frame, corner, 0.0, target, mu, cmodel))
         z += half[2]
         q_parts.append(np.array([0.0, 0.0, z, 0.0, 0.0, 0.0, 1.0]))
         z += half[2]

@@ -66,6 +66,10 @@ class Table:
 
 _VEC3 = dict(kind="vector", length=3)
 
+CONTACT_MODELS = ("spatial", "planar", "frictionless")
+_MODEL_DOC = ("contact model: spatial (3 rows t1, t2, n), planar (2 rows t1, n: planar scenes) or frictionless "
+              "(1 unilateral row n); mu = 0 uses the 1 row automatically")
+
 GROUND = Table("ground", "The ground plane z = 0; a slope tilts gravity (downhill = +x).", (
     Key("slope_deg", "float", "slope angle in degrees (gravity tilted about y)", 0.0, low=-89.0, high=89.0),
     Key("mu", "float", "friction coefficient of every contact unless a wall or pair sets its own", 0.5, low=0.0),
@@ -77,7 +81,9 @@ CONTACTS = Table("contacts", "Which points of the robot touch the ground (analyt
         "0 for frames)", low=0.0),
     Key("frames", "strings", "extra frames carrying a contact sphere of `radius`", ()),
     Key("soles", "bool", "the sole corner points of a bundled humanoid", True),
-    Key("box_corners", "bool", "the 8 corners of the URDF's box visual as contact points", False),
+    Key("box_corners", "bool", "the 8 corners of the URDF's box visual as contact points (`joint = \"planar\"`: "
+        "the 4 corners in the joint's plane)", False),
+    Key("model", "str", _MODEL_DOC, "spatial", choices=CONTACT_MODELS),
 ))
 
 CONTROL = Table("control", "Joint PD towards the initial posture (or `q_target`), implicit in time stepping.", (
@@ -91,6 +97,8 @@ CONTROL = Table("control", "Joint PD towards the initial posture (or `q_target`)
 INITIAL = Table("initial", "The initial state.", (
     Key("q", "vector", "the full configuration (nq entries; quaternions x, y, z, w, non-zero)"),
     Key("base_velocity", "vector", "free-flyer velocity [vx, vy, vz, wx, wy, wz] (local frame)", length=6),
+    Key("planar_velocity", "vector", "`joint = \"planar\"`: velocity [vx, vy, w] of the planar joint (body frame; "
+        "vx along world x, vy up)", length=3),
     Key("base_xy", "vector", "free-flyer x, y position", length=2),
     Key("drop", "float", "height in m above touching the ground", 0.0, low=0.0),
     Key("top_velocity", "vector", "`bodies` scenes: velocity of the top body (6 entries)", length=6),
@@ -105,6 +113,7 @@ WALLS = Table("walls", "Extra fixed half-spaces {x : normal . x >= offset} and t
     Key("radius", "float", "sphere radius in m", 0.0, low=0.0),
     Key("offset_in_frame", "vector", "sphere centre in the frame", (0.0, 0.0, 0.0), length=3),
     Key("mu", "float", "friction coefficient (default: [ground] mu)", low=0.0),
+    Key("model", "str", "contact model of the wall's spheres (default: [contacts] model)", choices=CONTACT_MODELS),
 ), array=True)
 
 ANCHORS = Table("anchors", "Point anchors: 3 bilateral rows each (paper §3), to the world or to another body.", (
@@ -127,6 +136,8 @@ COLLISION = Table("collision", "General shapes through coal: pairs among the URD
     Key("pairs", "pairs", "[[geometry a, geometry b], ...]", required=True, nonempty=True),
     Key("mu", "float", "friction coefficient of the pairs (default: [ground] mu)", low=0.0),
     Key("max_contacts", "int", "contact points per pair", 4, low=1, high=64),
+    Key("model", "str", "contact model of the pairs: spatial (3 rows) or frictionless (1 row); mu = 0: 1 row",
+        "spatial", choices=("spatial", "frictionless")),
 ), tables=(BOXES,))
 
 SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf` or `bodies`, the ground, contacts, control, "
@@ -136,6 +147,9 @@ SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf` or `bodies`, the
     Key("robot", "str", "a bundled robot (stiction.robots.ROBOTS)"),
     Key("urdf", "str", "a URDF path (relative: to the scene file's folder, then the bundled robots)"),
     Key("free_flyer", "bool", "`urdf`: a free-flyer root joint", True),
+    Key("joint", "str", "`urdf`: the root joint (default: free_flyer, or fixed when free_flyer = false). planar: "
+        "Pinocchio's planar joint (x, y, rotation about z) placed in the world's vertical x-z plane (joint x = "
+        "world x, joint y = world z, up); q = [x, z, cos, sin]", choices=("free_flyer", "planar", "fixed")),
     Key("bodies", "strings", "free-flying URDF boxes stacked in the listed order", nonempty=True),
     Key("duration", "float", "seconds simulated by default", 2.0, low=0.0, low_open=True),
     Key("dt", "float", "time step in s", 1e-3, low=0.0, low_open=True),
@@ -270,6 +284,11 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
                              (f", got {', '.join(given)}" if given else ""))
         if out["mode"] == "timestep" and "delta" in cfg:
             raise SceneError("delta applies to the ODE modes (mode = rk4, ode or adaptive) only")
+        if "joint" in cfg and "free_flyer" in cfg and (out["joint"] == "free_flyer") != out["free_flyer"]:
+            raise SceneError(f"joint = {out['joint']!r} contradicts free_flyer = {str(out['free_flyer']).lower()}; "
+                             "give `joint` only")
+        if out["joint"] is not None and out["urdf"] is None:
+            raise SceneError("joint applies to `urdf` scenes only")
         for i, a in enumerate(out["anchors"]):
             if a["target"] is not None and a["frame2"] is not None:
                 raise SceneError(f"anchors[{i}]: give `target` or `frame2`, not both")

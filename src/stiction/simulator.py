@@ -36,7 +36,9 @@ class Trajectory:
     contact_velocity (N, nc, 3) J v after each step; gaps (N, nc) signed distances;
     states (N, nc) 0 open / 1 stick / 2 slip / 3 closed; residual (N,) the largest solver
     residual of the step; iterations (N,); converged (N,); dt (N,) the step taken;
-    timings (N, 5) µs per phase: kinematics+collision, Delassus, solve, integrate, total.
+    timings (N, 5) µs per phase: kinematics+collision, Delassus, solve, integrate, total;
+    rows (N, nc) rows each contact used in the step (3 spatial, 2 planar, 1 frictionless or
+    mu = 0, 0 inactive; None in files saved before it was recorded).
     """
 
     scene: str
@@ -53,6 +55,7 @@ class Trajectory:
     converged: np.ndarray
     dt: np.ndarray
     timings: np.ndarray
+    rows: np.ndarray | None = None
 
     def save(self, path: str | Path) -> None:
         arrays = {k: v for k, v in asdict(self).items() if isinstance(v, np.ndarray)}
@@ -274,7 +277,8 @@ class Simulator:
             lam=rec["lam"].reshape(n, nc, 3), contact_velocity=rec["contact_velocity"].reshape(n, nc, 3),
             gaps=rec["gaps"].reshape(n, nc), states=rec["states"].astype(np.int8).reshape(n, nc),
             residual=rec["residual"], iterations=rec["iterations"].astype(np.int32),
-            converged=rec["converged"].astype(bool), dt=rec["dt"], timings=rec["timings"])
+            converged=rec["converged"].astype(bool), dt=rec["dt"], timings=rec["timings"],
+            rows=rec["rows"].astype(np.int8).reshape(n, nc))
 
     # ---- post-processing
     def contact_centers(self, traj: Trajectory) -> np.ndarray:
@@ -321,6 +325,12 @@ class Simulator:
                 centers = self.contact_centers(traj)
                 disp = centers[after][:, sphere_closed, :2] - centers[i0][sphere_closed, :2]
                 displacement = float(np.linalg.norm(disp, axis=-1).max())
+        # rows per candidate contact: the most any recorded step used (0: never active)
+        if traj.rows is not None and len(traj.t) > 1:
+            rows_per_contact = [int(x) for x in traj.rows[1:].max(axis=0)]
+            contact_rows = int(traj.rows[1:].sum(axis=1).max())
+        else:
+            rows_per_contact, contact_rows = [0] * traj.gaps.shape[1], 0
         tim = np.median(traj.timings[1:], axis=0) if len(traj.t) > 1 else np.zeros(5)
         out = {
             "scene": sc.name,
@@ -345,6 +355,8 @@ class Simulator:
             "expected_sliding_acceleration": sliding_acceleration(sc),
             "max_foot_slip": slip,
             "max_foot_displacement": displacement,
+            "rows_per_contact": rows_per_contact,
+            "contact_rows": contact_rows,
         }
         out["warnings"] = _warnings(out)
         return out
@@ -380,9 +392,9 @@ def _with_friction(scene: Scene, mu: float) -> Scene:
         out.mu = mu
         return out
 
-    sphere_fields = ("name", "frame", "offset", "radius", "halfspace", "planar")
+    sphere_fields = ("name", "frame", "offset", "radius", "halfspace", "model")
     contacts = [copy_contact(c, _core.SphereContact, sphere_fields) for c in scene.contacts]
-    pairs = [copy_contact(p, _core.GeometryPairContact, ("name", "pair", "max_contacts")) for p in scene.pairs]
+    pairs = [copy_contact(p, _core.GeometryPairContact, ("name", "pair", "max_contacts", "model")) for p in scene.pairs]
     return dataclasses.replace(scene, contacts=contacts, pairs=pairs, mu=mu)
 
 
@@ -402,7 +414,10 @@ def _warnings(summary: dict) -> list[str]:
 
 
 def sliding_acceleration(scene: Scene) -> float:
-    """g (sin θ - μ cos θ) when that is positive (a rigid body slides), else 0."""
+    """g (sin θ - μ cos θ) when that is positive (a rigid body slides), else 0; μ = 0 when every
+    contact is frictionless (model frictionless or μ = 0)."""
     th = math.radians(scene.slope_deg)
-    a = 9.81 * (math.sin(th) - scene.mu * math.cos(th))
+    items = list(scene.contacts) + list(scene.pairs)
+    frictionless = bool(items) and all(c.mu == 0.0 or c.model == _core.ContactModel.frictionless for c in items)
+    a = 9.81 * (math.sin(th) - (0.0 if frictionless else scene.mu) * math.cos(th))
     return a if a > 0 else 0.0

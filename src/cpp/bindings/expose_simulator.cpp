@@ -20,6 +20,11 @@ IntegrationMode fromPython<IntegrationMode>(const bp::object& x, const std::stri
   return toEnum<IntegrationMode>(x, name, "stiction.IntegrationMode");
 }
 
+template <>
+ContactModel fromPython<ContactModel>(const bp::object& x, const std::string& name) {
+  return toEnum<ContactModel>(x, name, "stiction.ContactModel");
+}
+
 namespace {
 
 const pinocchio::Model& toModel(const bp::object& model) {
@@ -103,6 +108,9 @@ Eigen::MatrixXd get_candidate_lambda(const SimulatorData& d) { return d.candidat
 Eigen::MatrixXd get_anchor_lambda(const SimulatorData& d) { return d.anchor_lambda; }
 Eigen::MatrixXd get_candidate_velocity(const SimulatorData& d) { return d.candidate_velocity; }
 SolverResult get_result(const SimulatorData& d) { return d.result; }
+Eigen::VectorXi get_candidate_rows(const SimulatorData& d) {
+  return Eigen::Map<const Eigen::VectorXi>(d.candidate_rows.data(), static_cast<Eigen::Index>(d.candidate_rows.size()));
+}
 bp::list get_active(const SimulatorData& d) {
   bp::list out;
   for (int i : d.active) out.append(i);
@@ -161,7 +169,7 @@ bp::dict rolloutImpl(const SimulatorModel& sim, SimulatorData& d, int n_steps, i
   const int na = static_cast<int>(sim.anchors.size());
   Eigen::VectorXd t(records), residual(records), iterations(records), converged(records), dts(records);
   Eigen::MatrixXd q(records, sim.model.nq), v(records, sim.model.nv), lam(records, 3 * nc), gaps(records, nc),
-      states(records, nc), anchors(records, 3 * na), timings(records, 5), vel(records, 3 * nc);
+      states(records, nc), rows(records, nc), anchors(records, 3 * na), timings(records, 5), vel(records, 3 * nc);
   auto record = [&](int r) {
     t[r] = d.t;
     q.row(r) = d.q.transpose();
@@ -170,6 +178,7 @@ bp::dict rolloutImpl(const SimulatorModel& sim, SimulatorData& d, int n_steps, i
       lam.block<1, 3>(r, 3 * i) = d.candidate_lambda.col(i).transpose();
       vel.block<1, 3>(r, 3 * i) = d.candidate_velocity.col(i).transpose();
       states(r, i) = static_cast<int>(d.candidate_states[i]);
+      rows(r, i) = d.candidate_rows[i];
     }
     gaps.row(r) = d.gaps.transpose();
     for (int a = 0; a < na; ++a) anchors.block<1, 3>(r, 3 * a) = d.anchor_lambda.col(a).transpose();
@@ -194,6 +203,7 @@ bp::dict rolloutImpl(const SimulatorModel& sim, SimulatorData& d, int n_steps, i
   out["contact_velocity"] = vel;
   out["gaps"] = gaps;
   out["states"] = states;
+  out["rows"] = rows;
   out["anchor_lam"] = anchors;
   out["residual"] = residual;
   out["iterations"] = iterations;
@@ -240,7 +250,14 @@ void exposeSimulator() {
     checkedMember(c, "radius", &SphereContact::radius);
     checkedMember(c, "halfspace", &SphereContact::halfspace);
     checkedMember(c, "mu", &SphereContact::mu);
-    checkedMember(c, "planar", &SphereContact::planar, "2 rows (t1, n) instead of 3");
+    checkedMember(c, "model", &SphereContact::model,
+                  "ContactModel: spatial (t1, t2, n), planar (t1, n) or frictionless (n); mu = 0: 1 row");
+    c.add_property(
+        "planar", +[](const SphereContact& s) { return s.model == ContactModel::kPlanar; },
+        +[](SphereContact& s, const bp::object& x) {
+          s.model = fromPython<bool>(x, "SphereContact.planar") ? ContactModel::kPlanar : ContactModel::kSpatial;
+        },
+        "alias: model == ContactModel.planar (True sets planar, False spatial)");
   }
   {
     bp::class_<GeometryPairContact> c("GeometryPairContact",
@@ -249,6 +266,7 @@ void exposeSimulator() {
     checkedMember(c, "pair", &GeometryPairContact::pair, "index into GeometryModel.collisionPairs");
     checkedMember(c, "mu", &GeometryPairContact::mu);
     checkedMember(c, "max_contacts", &GeometryPairContact::max_contacts);
+    checkedMember(c, "model", &GeometryPairContact::model, "ContactModel: spatial or frictionless; mu = 0: 1 row");
   }
   {
     bp::class_<PointAnchor> c("PointAnchor", "A frame point held at a world point: 3 bilateral rows.");
@@ -259,6 +277,10 @@ void exposeSimulator() {
     checkedMember(c, "frame2", &PointAnchor::frame2, "0: hold at the world point target; else a frame");
     checkedMember(c, "offset2", &PointAnchor::offset2);
   }
+  bp::enum_<ContactModel>("ContactModel")
+      .value("spatial", ContactModel::kSpatial)
+      .value("planar", ContactModel::kPlanar)
+      .value("frictionless", ContactModel::kFrictionless);
   bp::enum_<IntegrationMode>("IntegrationMode")
       .value("timestep", IntegrationMode::kTimeStepping)
       .value("rk4", IntegrationMode::kRK4)
@@ -335,6 +357,7 @@ void exposeSimulator() {
       .add_property("anchor_lambda", &get_anchor_lambda)
       .add_property("contact_velocity", &get_candidate_velocity, "3 x candidates: J v after the step")
       .add_property("states", &get_states)
+      .add_property("rows", &get_candidate_rows, "per candidate: rows in the last problem (0: inactive)")
       .add_property("result", &get_result)
       .add_property("timings", &get_timings)
       .def_readonly("rhs_evaluations", &SimulatorData::rhs_evaluations)

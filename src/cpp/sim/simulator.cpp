@@ -41,17 +41,37 @@ void completeTangents(HalfSpace& h) {
   h.tangent2 = h.normal.cross(h.tangent1);  // (t1, t2, n) right-handed
 }
 
-int rowsOf(const SphereContact& c) { return c.planar ? 2 : 3; }
+// Rows of a contact of model m and friction mu: 1 (n), 2 (t1, n) or 3 (t1, t2, n);
+// mu = 0 reduces to the unilateral row.
+int rowsOf(ContactModel m, double mu) {
+  if (m == ContactModel::kFrictionless || mu == 0.0) return 1;
+  return m == ContactModel::kPlanar ? 2 : 3;
+}
 
 // Rows and friction of candidate i (a sphere contact or a pair slot).
 int candidateRows(const SimulatorModel& sim, int i) {
-  return sim.slot_pair[i] < 0 ? rowsOf(sim.contacts[i]) : 3;
+  if (sim.slot_pair[i] < 0) return rowsOf(sim.contacts[i].model, sim.contacts[i].mu);
+  const GeometryPairContact& g = sim.pairs[sim.slot_pair[i]];
+  return rowsOf(g.model, g.mu);
 }
 double candidateMu(const SimulatorModel& sim, int i) {
   return sim.slot_pair[i] < 0 ? sim.contacts[i].mu : sim.pairs[sim.slot_pair[i]].mu;
 }
-bool candidatePlanar(const SimulatorModel& sim, int i) {
-  return sim.slot_pair[i] < 0 && sim.contacts[i].planar;
+
+// The 3-slot (t1, t2, n) layout from k = 1, 2 or 3 rows.
+Eigen::Vector3d toSlots(const double* x, int k) {
+  if (k == 3) return Eigen::Vector3d(x[0], x[1], x[2]);
+  if (k == 2) return Eigen::Vector3d(x[0], 0.0, x[1]);
+  return Eigen::Vector3d(0.0, 0.0, x[0]);
+}
+void fromSlots(const Eigen::Vector3d& s, int k, double* x) {
+  if (k == 3) {
+    x[0] = s[0], x[1] = s[1], x[2] = s[2];
+  } else if (k == 2) {
+    x[0] = s[0], x[1] = s[2];
+  } else {
+    x[0] = s[2];
+  }
 }
 
 // A right-handed (t1, t2, n) basis from a unit normal.
@@ -136,6 +156,9 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
       throw std::invalid_argument("pair '" + g.name + "': friction coefficient mu must be finite and >= 0");
     if (g.max_contacts < 1 || g.max_contacts > 64)
       throw std::invalid_argument("pair '" + g.name + "': max_contacts must be in 1..64");
+    if (g.model == ContactModel::kPlanar)
+      throw std::invalid_argument("pair '" + g.name + "': the planar contact model applies to sphere contacts only "
+                                  "(a coal pair is spatial or frictionless)");
     for (int k = 0; k < g.max_contacts; ++k) slot_pair.push_back(static_cast<int>(p));
   }
   num_candidates = static_cast<int>(slot_pair.size());
@@ -173,6 +196,7 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
   anchor_lambda = Eigen::MatrixXd::Zero(3, sim.anchors.size());
   candidate_velocity = Eigen::MatrixXd::Zero(3, nc);
   candidate_states.assign(nc, ContactState::kOpen);
+  candidate_rows.assign(nc, 0);
 }
 
 void computeControl(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
@@ -230,6 +254,7 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
 
   // Detection: sphere (or point) against half-space, analytic.
   sd.active.clear();
+  std::fill(sd.candidate_rows.begin(), sd.candidate_rows.end(), 0);
   Eigen::Index rows = 3 * static_cast<Eigen::Index>(sim.anchors.size());
   // Half-spaces in world coordinates (a body's face moves with its frame).
   sd.plane_normal.resize(3, sim.halfspaces.size());
@@ -259,7 +284,8 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
     sd.gaps[i] = sd.plane_normal.col(c.halfspace).dot(center) - sd.plane_offset[c.halfspace] - c.radius;
     if (sd.gaps[i] <= sim.settings.activation_distance) {
       sd.active.push_back(static_cast<int>(i));
-      rows += rowsOf(c);
+      sd.candidate_rows[i] = candidateRows(sim, static_cast<int>(i));
+      rows += sd.candidate_rows[i];
     }
   }
   // coal pairs: each reported point (signed distance below the activation
@@ -288,7 +314,8 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
         sd.slot_t2.col(slot) = t2;
         if (sd.gaps[slot] <= sim.settings.activation_distance) {
           sd.active.push_back(slot);
-          rows += 3;
+          sd.candidate_rows[slot] = candidateRows(sim, slot);
+          rows += sd.candidate_rows[slot];
         }
       }
     }
@@ -335,12 +362,14 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
       // contact point accelerates towards its centre while the gap stays 0), and for
       // general shapes the gap's curvature terms are not available; the position
       // term Psi / delta^2 keeps the constraint.
-      sd.J.row(row) = t1.transpose() * sd.Jrel;
-      sd.drift[row] = sd.J.row(row).dot(sd.frame_turn);
-      sd.tangent_row[row++] = 1.0;
-      sd.J.row(row) = t2.transpose() * sd.Jrel;
-      sd.drift[row] = sd.J.row(row).dot(sd.frame_turn);
-      sd.tangent_row[row++] = 1.0;
+      if (sd.candidate_rows[i] == 3) {  // else frictionless (or mu = 0): the normal row only
+        sd.J.row(row) = t1.transpose() * sd.Jrel;
+        sd.drift[row] = sd.J.row(row).dot(sd.frame_turn);
+        sd.tangent_row[row++] = 1.0;
+        sd.J.row(row) = t2.transpose() * sd.Jrel;
+        sd.drift[row] = sd.J.row(row).dot(sd.frame_turn);
+        sd.tangent_row[row++] = 1.0;
+      }
       sd.J.row(row) = n.transpose() * sd.Jrel;
       sd.drift[row] = sd.J.row(row).dot(sd.frame_turn);
       sd.position_error[row++] = sd.gaps[i];
@@ -379,11 +408,14 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
       acc_point -= acc_plane;
       acc_center -= acc_plane;
     }
-    sd.J.row(row) = t1.transpose() * sd.Jrel;
-    sd.drift[row] = t1.dot(acc_point);
-    sd.tangent_row[row] = 1.0;
-    ++row;
-    if (!c.planar) {
+    const int k = sd.candidate_rows[i];
+    if (k >= 2) {  // planar and spatial: t1 (planar scenes: the in-plane tangent)
+      sd.J.row(row) = t1.transpose() * sd.Jrel;
+      sd.drift[row] = t1.dot(acc_point);
+      sd.tangent_row[row] = 1.0;
+      ++row;
+    }
+    if (k == 3) {
       sd.J.row(row) = t2.transpose() * sd.Jrel;
       sd.drift[row] = t2.dot(acc_point);
       sd.tangent_row[row] = 1.0;
@@ -523,8 +555,11 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   if (!sd.problem || sd.active != sd.problem_active) {
     std::vector<Constraint> cons;
     for (int i : sd.active)
-      cons.push_back(candidatePlanar(sim, i) ? Constraint::planarFriction(candidateMu(sim, i))
-                                             : Constraint::spatialFriction(candidateMu(sim, i)));
+      switch (sd.candidate_rows[i]) {
+        case 1: cons.push_back(Constraint::unilateral()); break;
+        case 2: cons.push_back(Constraint::planarFriction(candidateMu(sim, i))); break;
+        default: cons.push_back(Constraint::spatialFriction(candidateMu(sim, i)));
+      }
     for (std::size_t a = 0; a < sim.anchors.size(); ++a) cons.push_back(Constraint::bilateral(3));
     sd.delassus = std::make_shared<DenseDelassus>(sd.A);
     // A = W^T W is semi-definite by construction: no Cholesky check per active-set change.
@@ -541,13 +576,10 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   bool any = false;
   Eigen::Index row = 0;
   for (int i : sd.active) {
-    const int k = candidateRows(sim, i);
+    const int k = sd.candidate_rows[i];
     if (sd.have_candidate_lambda[i]) {
       any = true;
-      if (k == 3)
-        sd.guess.segment<3>(row) = scale * sd.candidate_lambda.col(i);
-      else
-        sd.guess.segment<2>(row) << scale * sd.candidate_lambda(0, i), scale * sd.candidate_lambda(2, i);
+      fromSlots(scale * sd.candidate_lambda.col(i), k, sd.guess.data() + row);
     } else {
       sd.guess.segment(row, k).setZero();
     }
@@ -575,11 +607,8 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   row = 0;
   for (std::size_t blk = 0; blk < sd.active.size(); ++blk) {
     const int i = sd.active[blk];
-    const int k = candidateRows(sim, i);
-    if (k == 3)
-      sd.candidate_lambda.col(i) = sd.lambda.segment<3>(row);
-    else
-      sd.candidate_lambda.col(i) << sd.lambda[row], 0.0, sd.lambda[row + 1];
+    const int k = sd.candidate_rows[i];
+    sd.candidate_lambda.col(i) = toSlots(sd.lambda.data() + row, k);
     sd.have_candidate_lambda[i] = true;
     sd.candidate_states[i] = sd.result.states[blk];
     row += k;
@@ -822,13 +851,8 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
     if (sim.settings.mode != IntegrationMode::kTimeStepping) sd.row_velocity.noalias() = sd.J * sd.v;
     Eigen::Index row = 0;
     for (int i : sd.active) {
-      if (candidatePlanar(sim, i)) {
-        sd.candidate_velocity.col(i) << sd.row_velocity[row], 0.0, sd.row_velocity[row + 1];
-        row += 2;
-      } else {
-        sd.candidate_velocity.col(i) = sd.row_velocity.segment<3>(row);
-        row += 3;
-      }
+      sd.candidate_velocity.col(i) = toSlots(sd.row_velocity.data() + row, sd.candidate_rows[i]);
+      row += sd.candidate_rows[i];
     }
   }
   sd.timings.total = microseconds(t0, Clock::now());

@@ -44,6 +44,12 @@ struct HalfSpace {
   Eigen::Vector3d tangent2 = Eigen::Vector3d::UnitY();
 };
 
+/// The rows of a friction contact: spatial (t1, t2, n), planar (t1, n: planar
+/// scenes, t2 the out-of-plane tangent), frictionless (n: one unilateral row).
+/// A spatial or planar contact with mu = 0 is built as the frictionless row
+/// (fewer rows, same physics: the tangential impulse is 0).
+enum class ContactModel { kSpatial = 0, kPlanar = 1, kFrictionless = 2 };
+
 /// A sphere of `radius` (0: a point, e.g. a box corner) fixed at `offset` in
 /// frame `frame`, touching half-space `halfspace` with friction `mu`.
 struct SphereContact {
@@ -53,7 +59,7 @@ struct SphereContact {
   double radius = 0.0;
   int halfspace = 0;
   double mu = 0.5;
-  bool planar = false;  ///< planar scenes: 2 rows (t1, n) instead of 3
+  ContactModel model = ContactModel::kSpatial;
 };
 
 /// A collision pair of the scene's GeometryModel handled by coal: general shapes
@@ -66,6 +72,7 @@ struct GeometryPairContact {
   pinocchio::PairIndex pair = 0;  ///< index into GeometryModel::collisionPairs
   double mu = 0.5;
   int max_contacts = 4;
+  ContactModel model = ContactModel::kSpatial;  ///< spatial or frictionless (planar: spheres only)
 };
 
 /// A point of frame `frame` (at `offset`) held at the world point `target`, or
@@ -148,7 +155,7 @@ class SimulatorData {
 
   // The last contact problem (active blocks in candidate order, then anchors).
   std::vector<int> active;           ///< candidate index of each active contact block
-  Eigen::MatrixXd J;                 ///< rows x nv, rows (t1, t2, n) per contact, then anchors
+  Eigen::MatrixXd J;                 ///< rows x nv, per contact (t1, t2, n), (t1, n) or (n), then anchors
   Eigen::MatrixXd A;                 ///< rows x rows, J M^-1 J^T (eq. 22)
   Eigen::VectorXd b;                 ///< eq. 27 at force level
   Eigen::VectorXd drift;             ///< J' v per row
@@ -159,8 +166,9 @@ class SimulatorData {
   SolverResult result;               ///< the last solve
 
   // Per candidate / anchor, after the last solve (inactive candidates: 0, open).
-  Eigen::MatrixXd candidate_lambda;  ///< 3 x candidates, force (t1, t2, n); planar: t2 = 0
+  Eigen::MatrixXd candidate_lambda;  ///< 3 x candidates, force (t1, t2, n); planar: t2 = 0; 1 row: t1 = t2 = 0
   std::vector<bool> have_candidate_lambda;
+  std::vector<int> candidate_rows;   ///< rows of each candidate in the last problem (0: inactive)
   std::vector<ContactState> candidate_states;
   Eigen::MatrixXd anchor_lambda;     ///< 3 x anchors
   Eigen::MatrixXd candidate_velocity;  ///< 3 x candidates, contact velocity J v after the step
