@@ -2,11 +2,13 @@
 from typing import Any, ClassVar, overload
 
 import numpy
+import numpy.typing
+import pinocchio
 
 class Constraint:
     """One block of rows. Build with Constraint.bilateral(k), Constraint.unilateral(), Constraint.planar_friction(mu), Constraint.spatial_friction(mu). Normal row last."""
     @staticmethod
-    def bilateral(rows: Any) -> Constraint: ...
+    def bilateral(rows: int) -> Constraint: ...
     @property
     def kind(self) -> ConstraintKind: ...
 
@@ -14,12 +16,12 @@ class Constraint:
     def mu(self) -> float: ...
 
     @staticmethod
-    def planar_friction(mu: Any) -> Constraint: ...
+    def planar_friction(mu: float) -> Constraint: ...
     @property
     def size(self) -> int: ...
 
     @staticmethod
-    def spatial_friction(mu: Any) -> Constraint: ...
+    def spatial_friction(mu: float) -> Constraint: ...
     @staticmethod
     def unilateral() -> Constraint: ...
 
@@ -43,7 +45,7 @@ class ContactProblem:
     @property
     def A(self) -> numpy.ndarray: ...
 
-    def __init__(self, A: Any = ..., b: Any = ..., constraints: Any = ..., asymmetry_tolerance: Any = ...) -> None: ...
+    def __init__(self, A: numpy.typing.ArrayLike = ..., b: numpy.typing.ArrayLike = ..., constraints: list[Constraint] = ..., asymmetry_tolerance: float = ...) -> None: ...
     @property
     def asymmetry(self) -> float: ...
 
@@ -62,7 +64,7 @@ class ContactProblem:
     @property
     def offsets(self) -> list: ...
 
-    def set_b(self, b: Any) -> None: ...
+    def set_b(self, b: numpy.typing.ArrayLike) -> None: ...
 
 class ContactState(int):
     closed: ClassVar[ContactState]
@@ -210,7 +212,7 @@ class SimulatorData:
     @property
     def M(self) -> numpy.ndarray: ...
 
-    def __init__(self, sim: Any = ...) -> None: ...
+    def __init__(self, sim: SimulatorModel = ...) -> None: ...
     @property
     def active(self) -> list: ...
 
@@ -279,7 +281,7 @@ class SimulatorData:
 
 class SimulatorModel:
     """Immutable description: pinocchio.Model, half-spaces, contacts, anchors, settings."""
-    def __init__(self, model: Any = ..., halfspaces: Any = ..., contacts: Any = ..., anchors: Any = ..., settings: Any = ..., geometry: Any = ..., pairs: Any = ...) -> None: ...
+    def __init__(self, model: pinocchio.Model = ..., halfspaces: list[HalfSpace] = ..., contacts: list[SphereContact] = ..., anchors: list[PointAnchor] = ..., settings: SimulatorSettings = ..., geometry: pinocchio.GeometryModel | None = ..., pairs: list[GeometryPairContact] = ...) -> None: ...
     @property
     def contacts(self) -> list: ...
 
@@ -331,11 +333,11 @@ class SolveStatus(int):
 
 class Solver:
     """One algorithm with its reusable workspace: 'default', 'nsgs', 'admm' or 'newton'."""
-    def __init__(self, name: Any) -> None: ...
+    def __init__(self, name: str) -> None: ...
     @property
     def name(self) -> str: ...
 
-    def solve(self, problem: Any, settings: Any, guess: Any = ...) -> SolverResult: ...
+    def solve(self, problem: ContactProblem, settings: SolverSettings, guess: numpy.typing.ArrayLike | None = ...) -> SolverResult: ...
 
 class SolverResult:
     """Outcome of a solve; every solver reports the same residual."""
@@ -444,23 +446,23 @@ class WarmStart(int):
     names: ClassVar[dict[str, WarmStart]]
     values: ClassVar[dict[int, WarmStart]]
 
-def build_contact_problem(sim: Any, data: Any, q: Any, v: Any, delta: Any, zeta: Any) -> None:
+def build_contact_problem(sim: SimulatorModel, data: SimulatorData, q: numpy.typing.ArrayLike, v: numpy.typing.ArrayLike, delta: float, zeta: float) -> None:
     """fill data.J, A, b (eq. 27), drift, position_error and active at (q, v)"""
 
-def exact_law_measures(problem: Any, lam: Any, relative_speed_floor: Any = ...) -> ExactLawMeasures:
+def exact_law_measures(problem: ContactProblem, lam: numpy.typing.ArrayLike, relative_speed_floor: float = ...) -> ExactLawMeasures:
     """How far lam is from the exact Coulomb law, part by part (ExactLawMeasures): natural map, primal and dual feasibility, complementarity, Signorini, maximum dissipation and lift-off of sliding blocks."""
 
-def residual(problem: Any, lam: Any) -> float:
+def residual(problem: ContactProblem, lam: numpy.typing.ArrayLike) -> float:
     """natural-map residual of the De Saxce problem / (1 + ||b||)"""
 
-def rk4_stable_step(delta: Any, zeta: Any = ...) -> float:
+def rk4_stable_step(delta: float, zeta: float = ...) -> float:
     """the largest dt SimulatorModel accepts in rk4 mode: 0.75 x RK4's stability limit on eq. 64"""
 
-def rollout(sim: Any, data: Any, n_steps: Any, record_every: Any = ...) -> dict:
+def rollout(sim: SimulatorModel, data: SimulatorData, n_steps: int, record_every: int = ...) -> dict:
     """n steps in C++; returns a dict of arrays (t, q, v, lam, gaps, states, residual, ...)"""
 
 def solver_names() -> list:
     ...
 
-def step(sim: Any, data: Any) -> None:
+def step(sim: SimulatorModel, data: SimulatorData) -> None:
     """advance one step"""
