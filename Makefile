@@ -16,7 +16,7 @@ test: build chromium
 
 # The API reference (Sphinx; every warning is an error): build/docs/index.html
 docs: build
-	$(BIN)/python -m sphinx -W --keep-going -q -b html docs/api build/docs
+	$(BIN)/python -m sphinx -E -W --keep-going -q -b html docs/api build/docs
 
 # Build a wheel in isolation, install it into a fresh venv with no extras, use it from /tmp
 wheel-smoke:

@@ -15,7 +15,7 @@ generated.mkdir(exist_ok=True)
 
 project = "stiction"
 release = stiction.__version__
-extensions = ["sphinx.ext.autodoc", "sphinx.ext.napoleon", "myst_parser"]
+extensions = ["sphinx.ext.autodoc", "myst_parser"]  # plain-prose docstrings: no napoleon (it read "x: y" lines as types)
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 exclude_patterns = ["_build"]
 autodoc_default_options = {"members": True, "undoc-members": False, "show-inheritance": False}
