@@ -17,6 +17,14 @@ namespace python {
 
 namespace bp = boost::python;
 
+/// A Python list of the elements of a C++ container (each converted by Boost.Python).
+template <typename Container>
+bp::list pyList(const Container& items) {
+  bp::list out;
+  for (const auto& item : items) out.append(item);
+  return out;
+}
+
 /// Raise TypeError(message) (never returns).
 [[noreturn]] void raiseTypeError(const std::string& message);
 

@@ -31,9 +31,7 @@ Constraint planar(const bp::object& mu) { return Constraint::planarFriction(toDo
 Constraint spatial(const bp::object& mu) { return Constraint::spatialFriction(toDouble(mu, "Constraint.spatial_friction: mu")); }
 
 bp::list constraintsOf(const ContactProblem& p) {
-  bp::list out;
-  for (const Constraint& c : p.constraints()) out.append(c);
-  return out;
+  return pyList(p.constraints());
 }
 
 bp::list offsetsOf(const ContactProblem& p) {

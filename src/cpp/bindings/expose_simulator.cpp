@@ -112,14 +112,10 @@ Eigen::VectorXi get_candidate_rows(const SimulatorData& d) {
   return Eigen::Map<const Eigen::VectorXi>(d.candidate_rows.data(), static_cast<Eigen::Index>(d.candidate_rows.size()));
 }
 bp::list get_active(const SimulatorData& d) {
-  bp::list out;
-  for (int i : d.active) out.append(i);
-  return out;
+  return pyList(d.active);
 }
 bp::list get_states(const SimulatorData& d) {
-  bp::list out;
-  for (ContactState s : d.candidate_states) out.append(s);
-  return out;
+  return pyList(d.candidate_states);
 }
 bp::dict get_timings(const SimulatorData& d) {
   bp::dict out;
@@ -219,14 +215,10 @@ long ncontacts(const SimulatorModel& s) { return static_cast<long>(s.contacts.si
 long ncandidates(const SimulatorModel& s) { return s.numCandidates(); }
 long nanchors(const SimulatorModel& s) { return static_cast<long>(s.anchors.size()); }
 bp::list halfspacesOf(const SimulatorModel& s) {
-  bp::list out;
-  for (const auto& h : s.halfspaces) out.append(h);
-  return out;
+  return pyList(s.halfspaces);
 }
 bp::list contactsOf(const SimulatorModel& s) {
-  bp::list out;
-  for (const auto& c : s.contacts) out.append(c);
-  return out;
+  return pyList(s.contacts);
 }
 SimulatorSettings settingsOf(const SimulatorModel& s) { return s.settings; }
 

@@ -47,19 +47,13 @@ std::shared_ptr<Solver> makeSolverObject(const bp::object& name) {
 Eigen::VectorXd lamOf(const SolverResult& r) { return r.lam; }
 Eigen::VectorXd uOf(const SolverResult& r) { return r.u; }
 bp::list statesOf(const SolverResult& r) {
-  bp::list out;
-  for (ContactState s : r.states) out.append(s);
-  return out;
+  return pyList(r.states);
 }
 bp::list stagesOf(const SolverResult& r) {
-  bp::list out;
-  for (const StageReport& s : r.stages) out.append(s);
-  return out;
+  return pyList(r.stages);
 }
 bp::list blocksOf(const SolverResult& r) {
-  bp::list out;
-  for (int i : r.implicated_blocks) out.append(i);
-  return out;
+  return pyList(r.implicated_blocks);
 }
 std::string stageRepr(const StageReport& s) {
   return "StageReport(" + s.name + ": " + std::to_string(s.iterations) + " iterations, " +
@@ -87,9 +81,7 @@ Eigen::VectorXd vectorOf(const ExactLawMeasures& e) {
   return e.*member;
 }
 bp::list lawStatesOf(const ExactLawMeasures& e) {
-  bp::list out;
-  for (ContactState s : e.states) out.append(s);
-  return out;
+  return pyList(e.states);
 }
 bp::object slidingOf(const ExactLawMeasures& e) {
   bp::list out;
