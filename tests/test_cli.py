@@ -163,3 +163,17 @@ def test_coarse_step_penetration_is_warned_about(capsys):
     assert s["max_penetration"] == pytest.approx(0.04715, abs=1e-4)
     assert len(s["warnings"]) == 1 and "too coarse" in s["warnings"][0]
     assert_one_line(err, "warning: max penetration 0.0472 m exceeds 0.001 m")
+
+
+def test_a_reader_that_stops_early_is_not_an_error(monkeypatch, capsys):
+    """`stiction scenes | head -1` or `| grep -q`: the closed pipe ends the command quietly with 0
+    (it was reported as an internal error, exit 1, which failed the CI smoke test's pipeline)."""
+    import io
+
+    class ClosedPipe(io.StringIO):
+        def write(self, text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(sys, "stdout", ClosedPipe())
+    assert main(["scenes"]) == 0
+    assert "internal error" not in capsys.readouterr().err

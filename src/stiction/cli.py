@@ -325,6 +325,12 @@ def main(argv: list[str] | None = None) -> int:
     except RuntimeError as exc:  # e.g. a simulation that diverged
         print(f"stiction {args.command}: {_one_line(exc)}", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # the reader stopped early (`stiction scenes | head -1`): not an error
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        except (OSError, ValueError, AttributeError):
+            pass
+        return 0
     except KeyboardInterrupt:
         print(f"stiction {args.command}: interrupted", file=sys.stderr)
         return 130
