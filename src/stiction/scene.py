@@ -13,7 +13,6 @@ robot), ``urdf`` (a URDF path) or ``bodies`` (stacked boxes); ``[ground]`` slope
 """
 from __future__ import annotations
 
-import difflib
 import math
 import os
 import tomllib
@@ -27,7 +26,7 @@ from . import _core
 from .resources import robots_dir as bundled_robots_dir
 from .resources import scenes_dir
 from .robots import load_robot, load_urdf, robot_package_dirs
-from .scene_schema import SceneError, validate_scene
+from .scene_schema import SceneError, did_you_mean, validate_scene
 
 GRAVITY = 9.81
 
@@ -158,8 +157,7 @@ def load_scene(name_or_path: str | os.PathLike) -> Scene:
     if not p.suffix and not p.exists():
         p = scenes_dir() / f"{name_or_path}.toml"
         if not p.is_file():
-            close = difflib.get_close_matches(str(name_or_path), list_scenes(), n=1, cutoff=0.6)
-            hint = f"did you mean {close[0]!r}? " if close else ""
+            hint = did_you_mean(name_or_path, list_scenes(), cutoff=0.6)
             raise SceneError(f"unknown scene {str(name_or_path)!r} ({hint}known: {', '.join(list_scenes())}; "
                              "or give the path of a .toml file)")
     if not p.is_file():
@@ -224,8 +222,7 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             from .robots import ROBOTS
 
             if cfg["robot"] not in ROBOTS:
-                close = difflib.get_close_matches(cfg["robot"], list(ROBOTS), n=1, cutoff=0.5)
-                hint = f"did you mean {close[0]!r}? " if close else ""
+                hint = did_you_mean(cfg["robot"], ROBOTS)
                 raise SceneError(f"robot = {cfg['robot']!r}: unknown robot ({hint}known: {', '.join(sorted(ROBOTS))}; "
                                  "or give `urdf`)")
             robot = load_robot(cfg["robot"])
@@ -386,9 +383,8 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
 
 def _frame_id(model: pin.Model, name: str, field: str) -> int:
     if not model.existFrame(name):
-        close = difflib.get_close_matches(name, [f.name for f in model.frames], n=1, cutoff=0.5)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise SceneError(f"{field}: no frame {name!r} in the model{hint}")
+        hint = did_you_mean(name, [f.name for f in model.frames])
+        raise SceneError(f"{field}: no frame {name!r} in the model" + (f" ({hint.strip()})" if hint else ""))
     return model.getFrameId(name)
 
 
@@ -419,8 +415,7 @@ def _collision_pairs(cfg: dict, model: pin.Model, mu: float, urdf_path: Path | N
     for k, (a, b) in enumerate(col["pairs"]):
         for n in (a, b):
             if n not in names:
-                close = difflib.get_close_matches(n, names, n=1, cutoff=0.5)
-                hint = f"did you mean {close[0]!r}? " if close else ""
+                hint = did_you_mean(n, names)
                 raise SceneError(f"collision.pairs[{k}]: no geometry {n!r} ({hint}known: {', '.join(names)})")
         if a == b:
             raise SceneError(f"collision.pairs[{k}]: a geometry cannot collide with itself ({a!r})")

@@ -165,9 +165,16 @@ def _where(path: str) -> str:
     return f"[{path}]" if path else "the top level"
 
 
+def did_you_mean(name: str, options, cutoff: float = 0.5) -> str:
+    """"did you mean 'x'? " for the option closest to a misspelt name, or "" (every "unknown ..."
+    message of the package uses it)."""
+    match = difflib.get_close_matches(str(name), list(options), n=1, cutoff=cutoff)
+    return f"did you mean {match[0]!r}? " if match else ""
+
+
 def _closest(name: str, options: list[str]) -> str:
-    match = difflib.get_close_matches(name, options, n=1, cutoff=0.5)
-    return f" (did you mean {match[0]!r}?)" if match else f" (valid: {', '.join(options)})"
+    hint = did_you_mean(name, options)
+    return f" ({hint.strip()})" if hint else f" (valid: {', '.join(options)})"
 
 
 def _is_number(x) -> bool:

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
 import os
 from dataclasses import asdict, dataclass
@@ -14,6 +13,7 @@ import pinocchio as pin
 
 from . import _core
 from .scene import Scene, load_scene
+from .scene_schema import did_you_mean
 
 _VECTOR_KEYS = ("t", "residual", "iterations", "converged", "dt")
 
@@ -132,8 +132,7 @@ class Simulator:
     def __init__(self, scene: Scene | str | os.PathLike, **overrides):
         for key in overrides:
             if key not in OVERRIDES:
-                close = difflib.get_close_matches(key, list(OVERRIDES), n=1, cutoff=0.5)
-                hint = f"did you mean {close[0]!r}? " if close else ""
+                hint = did_you_mean(key, OVERRIDES)
                 raise TypeError(f"Simulator: unknown override {key!r} ({hint}valid: {', '.join(OVERRIDES)})")
         if isinstance(scene, Scene):
             sc = scene
