@@ -223,6 +223,35 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def cmd_casestudy(args) -> int:
+    from . import casestudies
+
+    mod = casestudies.module(args.name)  # unknown name: exit 2 before any work
+    if args.plot:
+        _output_path("--plot", args.plot, (".png", ".pdf", ".svg"))
+        require("matplotlib", "plot", "--plot")
+    result = mod.run(quick=args.quick)
+    if args.plot:
+        mod.plot(result, args.plot)
+    if args.json:
+        json.dump(result.to_json(), sys.stdout, indent=1)
+        sys.stdout.write("\n")
+    else:
+        print(f"{result.name}: {result.title} (eq. {result.equations})")
+        for c in result.checks:
+            print(f"  {'ok  ' if c.passed else 'FAIL'} {c.quantity}: measured {c.measured:.6g}, expected "
+                  f"{'' if c.kind == '==' else c.kind + ' '}{c.expected:.6g} (error {c.error:.3g}, tolerance {c.tolerance:.3g})")
+        for note in result.notes:
+            print(f"  note: {note}")
+        if args.plot:
+            print(f"  wrote {args.plot}")
+    failed = [c.quantity for c in result.checks if not c.passed]
+    if failed:
+        print(f"stiction casestudy: {args.name}: {len(failed)} check(s) failed: {'; '.join(failed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def cmd_solvers(args) -> int:
     for name in solver_names():
         print(name)
@@ -311,6 +340,14 @@ def main(argv: list[str] | None = None) -> int:
 
     p = sub.add_parser("scenes", help="list the bundled scenes")
     p.set_defaults(func=cmd_scenes)
+
+    p = sub.add_parser("casestudy", help="run one of the paper's case studies and check its numbers")
+    p.add_argument("name", help="planar-friction, restitution, painleve, pendulum, kinematic-levels, "
+                   "diagonal-push, slide-lift")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the case study's figure")
+    p.add_argument("--json", action="store_true", help="print name, equations, checks and points as JSON")
+    p.add_argument("--quick", action="store_true", help="a smaller sweep (same checks)")
+    p.set_defaults(func=cmd_casestudy)
 
     p = sub.add_parser("solvers", help="list the solver names")
     p.set_defaults(func=cmd_solvers)
