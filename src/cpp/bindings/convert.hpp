@@ -12,6 +12,8 @@
 #include <boost/python.hpp>
 #include <Eigen/Core>
 
+#include "stiction/formulation.hpp"
+
 namespace stiction {
 namespace python {
 
@@ -82,6 +84,7 @@ template <> int fromPython<int>(const bp::object& x, const std::string& name);
 template <> long fromPython<long>(const bp::object& x, const std::string& name);
 template <> unsigned long fromPython<unsigned long>(const bp::object& x, const std::string& name);
 template <> bool fromPython<bool>(const bp::object& x, const std::string& name);
+template <> FormulationSettings fromPython<FormulationSettings>(const bp::object& x, const std::string& name);
 template <> std::string fromPython<std::string>(const bp::object& x, const std::string& name);
 template <> Eigen::Vector3d fromPython<Eigen::Vector3d>(const bp::object& x, const std::string& name);
 
@@ -100,3 +103,4 @@ void checkedMember(Class& cls, const char* name, T C::*member, const char* doc =
 
 }  // namespace python
 }  // namespace stiction
+

@@ -288,6 +288,10 @@ void exposeSimulator() {
     checkedMember(c, "min_dt", &SimulatorSettings::min_dt);
     checkedMember(c, "activation_distance", &SimulatorSettings::activation_distance);
     checkedMember(c, "solver", &SimulatorSettings::solver);
+    checkedMember(c, "formulation", &SimulatorSettings::formulation,
+                  "exact (eq. 65), ccp, nakaoka, pyramid, penalty, pinocchio-admm, ... (formulation_infos())");
+    checkedMember(c, "formulation_settings", &SimulatorSettings::formulation_settings,
+                  "a copy: assign a whole FormulationSettings to change it");
     checkedMember(c, "warm_start", &SimulatorSettings::warm_start);
     checkedMember(c, "implicit_pd", &SimulatorSettings::implicit_pd,
                   "time stepping: joint PD implicit over the step (stable for any gains)");

@@ -6,6 +6,7 @@
 #include "convert.hpp"
 #include "expose.hpp"
 #include "stiction/exact_law.hpp"
+#include "stiction/formulation.hpp"
 #include "stiction/solver.hpp"
 
 namespace bp = boost::python;
@@ -18,7 +19,68 @@ WarmStart fromPython<WarmStart>(const bp::object& x, const std::string& name) {
   return toEnum<WarmStart>(x, name, "stiction.WarmStart");
 }
 
+template <>
+FormulationSettings fromPython<FormulationSettings>(const bp::object& x, const std::string& name) {
+  return toObject<FormulationSettings>(x, name, "stiction.FormulationSettings");
+}
+
 namespace {
+
+/// Python handle on one formulation (formulation.hpp) and its reusable workspace.
+struct FormulationSolver {
+  FormulationSolver(const std::string& name, const FormulationSettings& settings)
+      : impl(makeFormulation(name, settings)), formulation(name) {}
+  std::unique_ptr<ContactSolver> impl;
+  std::string formulation;
+  Eigen::VectorXd position_error, state;
+
+  SolverResult solveWith(const bp::object& problem, const bp::object& settings, const bp::object& guess,
+                         const bp::object& h, const bp::object& psi) {
+    const ContactProblem& p =
+        toObject<ContactProblem>(problem, "Formulation.solve: problem", "stiction.ContactProblem");
+    const SolverSettings& s =
+        toObject<SolverSettings>(settings, "Formulation.solve: settings", "stiction.SolverSettings");
+    StepContext context;
+    context.h = toDouble(h, "Formulation.solve: h");
+    if (!(context.h > 0.0) || !std::isfinite(context.h))
+      throw std::invalid_argument("Formulation.solve: h (the step) must be a positive finite number");
+    if (!psi.is_none()) {
+      position_error = toVector(psi, "Formulation.solve: position_error", p.numRows());
+      context.position_error = &position_error;
+    }
+    setFormulationContext(*impl, context);
+    SolverResult result;
+    if (guess.is_none()) {
+      stiction::solve(p, *impl, s, result, nullptr);
+    } else {
+      const Eigen::VectorXd v = toVector(guess, "Formulation.solve: guess (initial lambda)");
+      stiction::solve(p, *impl, s, result, &v);
+    }
+    return result;
+  }
+  std::string name() const { return formulation; }
+};
+
+std::shared_ptr<FormulationSolver> makeFormulationObject(const bp::object& name, const bp::object& settings) {
+  const FormulationSettings fs = settings.is_none() ? FormulationSettings()
+                                                    : fromPython<FormulationSettings>(settings, "Formulation: settings");
+  return std::make_shared<FormulationSolver>(toStringArg(name, "Formulation: name"), fs);
+}
+
+bp::list formulationList() {
+  bp::list out;
+  for (const FormulationInfo& info : formulationInfos()) {
+    bp::dict d;
+    d["name"] = info.name;
+    d["equations"] = info.equations;
+    d["summary"] = info.summary;
+    bp::list params;
+    for (const auto& prm : info.parameters) params.append(prm);
+    d["parameters"] = params;
+    out.append(d);
+  }
+  return out;
+}
 
 /// Python handle on one algorithm and its reusable workspace.
 struct Solver {
@@ -158,7 +220,36 @@ void exposeSolver() {
       .def_readonly("warm_start_seconds", &SolverResult::warm_start_seconds, "ProxQP's time, wherever it ran")
       .def_readonly("warm_start_iterations", &SolverResult::warm_start_iterations)
       .def_readonly("solver", &SolverResult::solver)
-      .def_readonly("message", &SolverResult::message);
+      .def_readonly("message", &SolverResult::message)
+      .def_readonly("own_converged", &SolverResult::own_converged,
+                    "the formulation met its own stopping test (exact solvers: = converged)")
+      .def_readonly("own_residual", &SolverResult::own_residual, "the formulation's own measure (own_law)")
+      .def_readonly("own_law", &SolverResult::own_law, "what own_residual measures");
+  {
+    bp::class_<FormulationSettings> fs("FormulationSettings",
+                                       "Parameters of the formulations (stiction formulations lists them).");
+    checkedMember(fs, "exact_solver", &FormulationSettings::exact_solver, "exact: default | nsgs | admm | newton");
+    checkedMember(fs, "pyramid_facets", &FormulationSettings::pyramid_facets, "pyramid: facets per cone (>= 3)");
+    checkedMember(fs, "pyramid_inscribed", &FormulationSettings::pyramid_inscribed,
+                  "pyramid: corners on the cone (True) or facets tangent to it (False)");
+    checkedMember(fs, "pyramid_max_fixed_point", &FormulationSettings::pyramid_max_fixed_point,
+                  "pyramid: QP solves on the De Saxce term at most");
+    checkedMember(fs, "penalty_stiffness", &FormulationSettings::penalty_stiffness, "penalty: K [N/m]");
+    checkedMember(fs, "penalty_damping", &FormulationSettings::penalty_damping, "penalty: beta [s]");
+  }
+  bp::class_<FormulationSolver, std::shared_ptr<FormulationSolver>, boost::noncopyable>(
+      "Formulation",
+      "One formulation (exact, ccp, nakaoka, pyramid, penalty, pinocchio-admm, ...) with its workspace; "
+      "solve() judges every result by the exact law.",
+      bp::no_init)
+      .def("__init__", bp::make_constructor(&makeFormulationObject, bp::default_call_policies(),
+                                            (bp::arg("name"), bp::arg("settings") = bp::object())))
+      .add_property("name", &FormulationSolver::name)
+      .def("solve", &FormulationSolver::solveWith,
+           (bp::arg("problem"), bp::arg("settings"), bp::arg("guess") = bp::object(), bp::arg("h") = 1.0,
+            bp::arg("position_error") = bp::object()));
+  bp::def("formulation_infos", &formulationList,
+          "One dict per formulation: name, equations (the paper's), summary, parameters.");
 
   bp::class_<Solver, std::shared_ptr<Solver>, boost::noncopyable>(
       "Solver", "One algorithm with its reusable workspace: 'default', 'nsgs', 'admm' or 'newton'.", bp::no_init)

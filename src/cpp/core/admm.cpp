@@ -42,6 +42,13 @@ void projectOntoConstraints(const ContactProblem& problem, Eigen::Ref<Eigen::Vec
   }
 }
 
+double coneNaturalMap(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
+                      const Eigen::Ref<const Eigen::VectorXd>& u, Eigen::VectorXd& work) {
+  work = lam - u;
+  projectOntoConstraints(problem, work);
+  return (lam - work).norm();
+}
+
 namespace {
 
 // v += sign * E s(u): the De Saxce shift mu ||u_t|| on each normal row (eq. 76-77).
@@ -108,7 +115,7 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
       A.multiply(z_, u_);
       u_ -= problem.b();
       y_ = -u_;
-      addDesaxce(problem, u_, -1.0, y_);
+      if (desaxce_) addDesaxce(problem, u_, -1.0, y_);
     }
     primal_ = z_;
     since_rho_change_ = 0;
@@ -123,7 +130,7 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
     A.multiply(primal_, ulam_);
     ulam_ -= problem.b();
     rhs_ = problem.b() + rho_ * z_ - y_ + prox_ * primal_;
-    addDesaxce(problem, ulam_, -1.0, rhs_);
+    if (desaxce_) addDesaxce(problem, ulam_, -1.0, rhs_);
     primal_ = rhs_;
     solveShifted(primal_);
     // z-update (projection onto C) and dual ascent
@@ -133,8 +140,10 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
     y_ += rho_ * (primal_ - z_);
     A.multiply(z_, u_);
     u_ -= problem.b();
-    const double map = naturalMapNorm(problem, z_, u_);
-    const StoppingTest::Outcome outcome = test.check(z_, u_, map);
+    const double map = desaxce_ ? naturalMapNorm(problem, z_, u_) : coneNaturalMap(problem, z_, u_, rhs_);
+    const StoppingTest::Outcome outcome =
+        desaxce_ ? test.check(z_, u_, map)
+                 : (map <= tolerance * scale ? StoppingTest::kConverged : StoppingTest::kContinue);
     if (outcome != StoppingTest::kContinue) {
       message = outcome == StoppingTest::kConverged ? "converged" : kUnresolvableMessage;
       ++it;

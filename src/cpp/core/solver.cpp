@@ -145,9 +145,14 @@ void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSet
       break;
     case WarmStart::kProxQP: result.lam.setZero(); break;
   }
+  const bool exact = solver.exactLaw();
+  result.own_converged = false;
+  result.own_residual = 0.0;
+  result.own_law.clear();
   // A contact that nothing can move but b pushes closed has no solution: say so
-  // before spending the budget (the verdict below names it).
-  const bool hopeless = beyondPrecision(problem, findInfeasibility(problem, {}).min_solution_norm);
+  // before spending the budget (the verdict below names it). Other formulations solve
+  // problems of their own (penalty: always solvable) and are only measured by the exact law.
+  const bool hopeless = exact && beyondPrecision(problem, findInfeasibility(problem, {}).min_solution_norm);
   if (!hopeless) {
     if (settings.warm_start == WarmStart::kProxQP) {
       Eigen::VectorXd ray;
@@ -187,6 +192,11 @@ void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSet
   const bool finite = std::isfinite(measures.natural_map) && std::isfinite(measures.bound) && result.lam.allFinite();
   if (finite && measures.natural_map + measures.bound <= threshold) {
     result.status = SolveStatus::kConverged;
+  } else if (!exact) {
+    // Another law than the exact one: its own verdict is in own_*; say how far the exact law is.
+    result.status = SolveStatus::kNotConverged;
+    result.message += std::string(result.message.empty() ? "" : "; ") + "exact-law residual " +
+                      fmt(result.relative_residual) + " x ||b||";
   } else {
     std::string why = result.message;
     if (startsWith(why, "converged")) why = "residual above tolerance " + why.substr(std::min<std::size_t>(10, why.size()));
@@ -229,6 +239,13 @@ void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSet
     }
   }
   result.converged = result.status == SolveStatus::kConverged;
+  if (exact) {
+    result.own_converged = result.converged;
+    result.own_residual = result.relative_residual;
+    result.own_law = "exact Coulomb law (eq. 65): natural map / ||b||";
+  } else if (!result.lam.allFinite()) {
+    result.own_converged = false;
+  }
   result.divergence_candidates.clear();
   result.seconds = elapsed();
 }

@@ -143,6 +143,11 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
     }
   }
   makeSolver(s.solver);  // throws on an unknown name
+  makeFormulation(s.formulation, s.formulation_settings);  // unknown name or bad parameter
+  if (s.formulation == "penalty" && s.mode != IntegrationMode::kTimeStepping)
+    throw std::invalid_argument(
+        "the penalty formulation integrates its springs by implicit Euler over the time step (Kikuuwe-Fujimoto, "
+        "eq. 83-84): it needs mode 'timestep', not an ODE mode");
   for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
     if (model.joints[j].shortname() == "JointModelFreeFlyer") free_flyers.push_back(j);
   slot_pair.assign(contacts.size(), -1);
@@ -170,6 +175,9 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
       q(pinocchio::neutral(sim.model)),
       v(Eigen::VectorXd::Zero(sim.model.nv)),
       solver(makeSolver(sim.settings.solver)) {
+  FormulationSettings fs = sim.settings.formulation_settings;
+  fs.exact_solver = sim.settings.solver;
+  solver = makeFormulation(sim.settings.formulation, fs);
   const int nv = sim.model.nv;
   control.kp = Eigen::VectorXd::Zero(nv);
   control.kd = Eigen::VectorXd::Zero(nv);
@@ -194,6 +202,7 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
   candidate_lambda = Eigen::MatrixXd::Zero(3, nc);
   have_candidate_lambda.assign(nc, false);
   anchor_lambda = Eigen::MatrixXd::Zero(3, sim.anchors.size());
+  candidate_spring = Eigen::MatrixXd::Zero(3, nc);
   candidate_velocity = Eigen::MatrixXd::Zero(3, nc);
   candidate_states.assign(nc, ContactState::kOpen);
   candidate_rows.assign(nc, 0);
@@ -590,17 +599,35 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     any = any || sd.anchor_lambda.col(a).squaredNorm() > 0.0;
   }
   settings.warm_start = sim.settings.warm_start && any ? WarmStart::kGiven : WarmStart::kNone;
+  const bool exact = sd.solver->exactLaw();
+  if (!exact) {  // what the other formulations may know of the step (formulation.hpp)
+    StepContext context;
+    context.h = scale;
+    context.position_error = &sd.position_error;
+    sd.spring_rows.setZero(rows);
+    row = 0;
+    for (int i : sd.active) {
+      const int k = sd.candidate_rows[i];
+      if (k > 1) fromSlots(sd.candidate_spring.col(i), k, sd.spring_rows.data() + row);
+      sd.spring_rows[row + k - 1] = 0.0;
+      row += k;
+    }
+    context.state = &sd.spring_rows;
+    setFormulationContext(*sd.solver, context);
+  }
   solve(*sd.problem, *sd.solver, settings, sd.result, &sd.guess);
   // Infeasible, or forces so large that not even a loose 1e-6 could be verified: the
   // step cannot go on. (An unreachable tolerance such as 1e-300 is also "unresolvable",
   // with a tiny floor: that step is only recorded as unconverged.)
+  // Other formulations are only measured by the exact law: they stop on non-finite impulses.
   if (sd.result.status == SolveStatus::kInfeasible || !sd.result.lam.allFinite() ||
-      (sd.result.status == SolveStatus::kUnresolvable && sd.result.precision_floor > kDivergedFloor))
+      (exact && sd.result.status == SolveStatus::kUnresolvable && sd.result.precision_floor > kDivergedFloor))
     throw std::runtime_error(unsolvableMessage(sim, sd));
   // Per-candidate forces (lambda / scale) and states.
   sd.lambda = sd.result.lam / scale;
   for (int i = 0; i < sim.numCandidates(); ++i) {
     sd.candidate_lambda.col(i).setZero();
+    sd.candidate_spring.col(i).setZero();
     sd.have_candidate_lambda[i] = false;
     sd.candidate_states[i] = ContactState::kOpen;
   }
@@ -608,6 +635,7 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   for (std::size_t blk = 0; blk < sd.active.size(); ++blk) {
     const int i = sd.active[blk];
     const int k = sd.candidate_rows[i];
+    if (!exact && k > 1) sd.candidate_spring.col(i) = toSlots(sd.spring_rows.data() + row, k);
     sd.candidate_lambda.col(i) = toSlots(sd.lambda.data() + row, k);
     sd.have_candidate_lambda[i] = true;
     sd.candidate_states[i] = sd.result.states[blk];
@@ -618,7 +646,7 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   sd.timings.solve += microseconds(t0, Clock::now());
   ++sd.solves;
   sd.max_residual_step = std::max(sd.max_residual_step, sd.result.residual);
-  sd.all_converged_step = sd.all_converged_step && sd.result.converged;
+  sd.all_converged_step = sd.all_converged_step && sd.result.own_converged;
   sd.iterations_step += sd.result.iterations;
 }
 

@@ -27,10 +27,15 @@ class AdmmSolver final : public ContactSolver {
   int run(const ContactProblem& problem, Eigen::VectorXd& lam, int max_iterations, double tolerance,
           double time_limit, double initial_rho, bool resume, std::string& message);
 
+  /// false: drop the De Saxce term, i.e. solve the convex CCP relaxation (eq. 78-79) and
+  /// stop on its natural map (coneNaturalMap) instead of the exact law's.
+  void setDesaxce(bool on) { desaxce_ = on; }
+
  private:
   void factorize(const ContactProblem& problem, double shift);
   void solveShifted(Eigen::VectorXd& x) const;
 
+  bool desaxce_ = true;
   bool symmetric_ = true;
   double L_ = 0.0, prox_ = 0.0, rho_ = 0.0;
   int since_rho_change_ = 0;
@@ -43,6 +48,11 @@ class AdmmSolver final : public ContactSolver {
 
 /// Largest eigenvalue of the symmetric part of A by power iteration (an estimate).
 double largestEigenvalue(const ContactProblem& problem, int iterations = 30);
+
+/// ||lambda - P_C(lambda - u)||: the natural map of the cone complementarity problem
+/// C* ∋ u ⟂ lambda ∈ C (eq. 71-72, 79), i.e. without De Saxce's term.
+double coneNaturalMap(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
+                      const Eigen::Ref<const Eigen::VectorXd>& u, Eigen::VectorXd& work);
 
 /// In-place projection of every block of x onto its set C.
 void projectOntoConstraints(const ContactProblem& problem, Eigen::Ref<Eigen::VectorXd> x);

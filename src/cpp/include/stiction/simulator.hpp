@@ -26,6 +26,7 @@
 #include <pinocchio/multibody/model.hpp>
 
 #include "stiction/contact_problem.hpp"
+#include "stiction/formulation.hpp"
 #include "stiction/solver.hpp"
 
 namespace stiction {
@@ -99,6 +100,10 @@ struct SimulatorSettings {
   double activation_distance = 0.02;  ///< a candidate enters the problem when its gap is below this
   std::string solver = "default";
   SolverSettings solver_settings;  ///< tolerance, iterations (warm start is set per step)
+  /// How each step's problem is resolved (formulation.hpp): "exact" (eq. 65, with `solver`),
+  /// "ccp", "nakaoka", "pyramid", "penalty" (time stepping only), "pinocchio-admm", ...
+  std::string formulation = "exact";
+  FormulationSettings formulation_settings;  ///< pyramid facets, penalty K and beta (exact_solver: `solver`)
   bool warm_start = true;          ///< start each solve from the previous step's lambda
   bool implicit_pd = true;         ///< time stepping: the joint PD implicit in the step (stable for any gains)
 };
@@ -171,6 +176,8 @@ class SimulatorData {
   std::vector<int> candidate_rows;   ///< rows of each candidate in the last problem (0: inactive)
   std::vector<ContactState> candidate_states;
   Eigen::MatrixXd anchor_lambda;     ///< 3 x anchors
+  Eigen::MatrixXd candidate_spring;  ///< penalty: tangential spring elongation e_t per candidate (t1, t2, 0)
+  Eigen::VectorXd spring_rows;       ///< the same per row of the last problem (the formulation's state)
   Eigen::MatrixXd candidate_velocity;  ///< 3 x candidates, contact velocity J v after the step
 
   // Statistics of the last step (ODE modes solve once per right-hand side).

@@ -62,6 +62,13 @@ struct SolverResult {
   std::string solver;
   std::string message;            ///< the verdict, the stage that stopped and why
 
+  // The formulation's own verdict (formulation.hpp). For the exact solvers it is the verdict
+  // above; for the others, their own stopping test, while residual / status / converged
+  // above always judge lambda by the exact law: "converged by its own law, exact-law residual X".
+  bool own_converged = false;
+  double own_residual = 0.0;      ///< the formulation's own measure, relative (own_law says which)
+  std::string own_law;            ///< what own_residual measures
+
   /// Set by the algorithms: iterates that ran away, or ProxQP's ray of unboundedness;
   /// the verdict tests them as infeasibility certificates.
   std::vector<Eigen::VectorXd> divergence_candidates;
@@ -74,6 +81,10 @@ class ContactSolver {
  public:
   virtual ~ContactSolver() = default;
   virtual std::string name() const = 0;
+  /// True for the solvers of the exact law (eq. 65): their result is judged by the full
+  /// verdict (infeasibility certificates included). Other formulations (formulation.hpp)
+  /// set result.own_converged / own_residual themselves.
+  virtual bool exactLaw() const { return true; }
 
   /// Iterate from result.lam (already sized and set to the initial guess) until
   /// the StoppingTest passes or the budget (iterations, settings.time_limit) is

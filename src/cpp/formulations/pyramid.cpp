@@ -1,0 +1,193 @@
+// pyramid: every spatial friction cone replaced by an N-facet pyramid (paper §4.5: the
+// facetized cones of Stewart-Trinkle [50] and Anitescu-Potra [8]).
+//
+// Facets k = 0..N-1 with outward normals at phi_k = 2 pi k / N in the tangent plane:
+//     cos(phi_k) l_t1 + sin(phi_k) l_t2 <= mu_f l_n,   l_n >= 0,
+// mu_f = mu (circumscribed: the facets touch the cone, the corners reach mu / cos(pi/N);
+// N = 4 is the box |l_t1|, |l_t2| <= mu l_n of many engines) or mu cos(pi/N) (inscribed:
+// the corners on the cone). Planar (2-row) contacts are already polyhedral: unchanged.
+//
+// The LCP of Stewart-Trinkle / Anitescu-Potra (friction as a combination of the pyramid's
+// edge directions, maximum dissipation over them, Signorini on the normal) is the cone
+// complementarity problem on the pyramid P with De Saxce's term for P:
+//     P ∋ lambda ⟂ u + E s_P(u) ∈ P*,    s_P(u) = max_j v_j . (-u_t)
+// (v_j the pyramid's corners at unit normal force: the largest dissipation rate the
+// pyramid allows). With s fixed this is the convex QP min 1/2 l'A l - (b - E s)'l over P,
+// a polyhedral QP that ProxQP (proxsuite) solves; s is then refreshed from the solution's u
+// and the QP re-solved, warm-started, until s stops moving: the fixed point on the De Saxce
+// term that the cone-complementarity literature uses for the exact law (Cadoux; Acary et
+// al.). Its first iterate (s = 0) is Anitescu's convex relaxation on the pyramid. Unlike
+// Lemke's pivoting this is not guaranteed to converge for large mu; when it does not, the
+// result says so (own_converged false).
+//
+// Own stopping test: the QP solved and ||E (s_P(u) - s)|| <= tol ||b||, i.e. the LCP's
+// complementarity holds up to the tolerance.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include <proxsuite/proxqp/dense/dense.hpp>
+
+#include "stiction/verdict.hpp"
+#include "formulations.hpp"
+
+namespace stiction {
+namespace {
+
+class PyramidFormulation final : public Formulation {
+ public:
+  std::string name() const override { return "pyramid"; }
+  std::string equations() const override { return "§4.5 (LCP of [8, 50])"; }
+
+  void iterate(const ContactProblem& problem, const SolverSettings& settings, SolverResult& result) override {
+    namespace pq = proxsuite::proxqp;
+    using Clock = std::chrono::steady_clock;
+    const auto start = Clock::now();
+    const auto& cons = problem.constraints();
+    const auto& off = problem.offsets();
+    const Eigen::Index m = problem.numRows();
+    const int N = settings_.pyramid_facets;
+    const double half = M_PI / N;
+    const double facet_mu = settings_.pyramid_inscribed ? std::cos(half) : 1.0;  // times mu
+    const double corner_radius = facet_mu / std::cos(half);                       // times mu
+    result.own_law = "pyramid LCP (" + std::to_string(N) + " facets, " +
+                     (settings_.pyramid_inscribed ? "inscribed" : "circumscribed") +
+                     "): QP solved and ||E (s_P(u) - s)|| / ||b||";
+    if (m == 0) {
+      result.lam.resize(0);
+      result.own_converged = true;
+      result.message = "converged";
+      return;
+    }
+    Eigen::Index n_in = 0;
+    for (const Constraint& c : cons) {
+      if (c.kind == ConstraintKind::kUnilateral) n_in += 1;
+      if (c.kind == ConstraintKind::kPlanarFriction) n_in += 3;
+      if (c.kind == ConstraintKind::kSpatialFriction) n_in += N + 1;
+    }
+    C_.setZero(n_in, m);
+    Eigen::Index row = 0;
+    for (std::size_t i = 0; i < cons.size(); ++i) {
+      const Eigen::Index o = off[i];
+      const double mu = cons[i].mu;
+      switch (cons[i].kind) {
+        case ConstraintKind::kBilateral: break;
+        case ConstraintKind::kUnilateral: C_(row++, o) = -1.0; break;
+        case ConstraintKind::kPlanarFriction:
+          C_(row++, o + 1) = -1.0;
+          for (double s : {1.0, -1.0}) {
+            C_(row, o) = s;
+            C_(row++, o + 1) = -mu;
+          }
+          break;
+        case ConstraintKind::kSpatialFriction:
+          C_(row++, o + 2) = -1.0;  // l_n >= 0 (implied for mu > 0, not for mu = 0)
+          for (int k = 0; k < N; ++k) {
+            C_(row, o) = std::cos(2.0 * M_PI * k / N);
+            C_(row, o + 1) = std::sin(2.0 * M_PI * k / N);
+            C_(row++, o + 2) = -mu * facet_mu;
+          }
+          break;
+      }
+    }
+    const Eigen::MatrixXd& A = problem.delassus().dense();
+    H_ = 0.5 * (A + A.transpose());
+    const double max_diag = std::max(H_.diagonal().maxCoeff(), 1e-300);
+    H_.diagonal().array() += 1e-12 * max_diag;  // A is only semi-definite
+    lower_.setConstant(n_in, -1e20);
+    upper_.setZero(n_in);
+    s_.setZero(m);  // E s: the De Saxce shift on the normal rows
+    g_ = -problem.b();
+    const double scale = stoppingScale(problem);
+    const double b_inf = problem.b().lpNorm<Eigen::Infinity>();
+
+    pq::dense::QP<double> qp(m, 0, n_in);
+    qp.settings.eps_rel = std::max(settings.tolerance, 1e-13);
+    qp.settings.eps_abs = std::max(1e-300, qp.settings.eps_rel * std::min(b_inf, b_inf / max_diag));
+    qp.settings.eps_primal_inf = 1e-12;
+    qp.settings.verbose = false;
+    qp.settings.max_iter = std::max(1, settings.proxqp_max_iterations);
+    qp.init(H_, g_, proxsuite::nullopt, proxsuite::nullopt, C_, lower_, upper_);
+    // Warm start from the caller's lambda (the previous step) when there is one.
+    if (result.lam.size() == m && result.lam.squaredNorm() > 0.0) {
+      qp.settings.initial_guess = pq::InitialGuessStatus::WARM_START;
+      qp.solve(result.lam, proxsuite::nullopt, Eigen::VectorXd::Zero(n_in));
+    } else {
+      qp.solve();
+    }
+    int qp_iterations = static_cast<int>(qp.results.info.iter);
+    result.own_converged = false;
+    result.message = "fixed point on the De Saxce term did not settle";
+    int outer = 1;
+    u_.resize(m);
+    s_new_.resize(m);
+    for (;; ++outer) {
+      if (qp.results.info.status != pq::QPSolverOutput::PROXQP_SOLVED) {
+        result.message = qp.results.info.status == pq::QPSolverOutput::PROXQP_DUAL_INFEASIBLE
+                             ? "the pyramid QP is unbounded (b pushes along a direction A does not resist)"
+                             : "ProxQP did not solve the pyramid QP (status " +
+                                   std::to_string(static_cast<int>(qp.results.info.status)) + ")";
+        break;
+      }
+      // s_P(u) from the solution's velocities
+      u_.noalias() = A * qp.results.x;
+      u_ -= problem.b();
+      s_new_.setZero();
+      for (std::size_t i = 0; i < cons.size(); ++i) {
+        const Eigen::Index o = off[i];
+        const double mu = cons[i].mu;
+        if (cons[i].kind == ConstraintKind::kPlanarFriction) {
+          s_new_[o + 1] = mu * std::abs(u_[o]);
+        } else if (cons[i].kind == ConstraintKind::kSpatialFriction) {
+          double best = 0.0;  // max over the corners v_j . (-u_t)
+          for (int k = 0; k < N; ++k) {
+            const double a = 2.0 * M_PI * k / N + half;
+            best = std::max(best, -(std::cos(a) * u_[o] + std::sin(a) * u_[o + 1]));
+          }
+          s_new_[o + 2] = mu * corner_radius * best;
+        }
+      }
+      result.own_residual = (s_new_ - s_).norm() / scale;
+      s_ = s_new_;
+      if (result.own_residual <= settings.tolerance) {
+        result.own_converged = true;
+        result.message = "converged";
+        break;
+      }
+      if (outer >= settings_.pyramid_max_fixed_point) {
+        result.message = "fixed point on the De Saxce term did not settle in " + std::to_string(outer) +
+                         " QP solves (LCP residual " + std::to_string(result.own_residual) + " x ||b||)";
+        break;
+      }
+      if (settings.time_limit > 0.0 &&
+          std::chrono::duration<double>(Clock::now() - start).count() > settings.time_limit) {
+        result.message = "time limit reached";
+        break;
+      }
+      g_ = s_ - problem.b();  // min 1/2 l'A l - (b - E s)'l
+      qp.settings.initial_guess = pq::InitialGuessStatus::WARM_START_WITH_PREVIOUS_RESULT;
+      qp.update(proxsuite::nullopt, g_, proxsuite::nullopt, proxsuite::nullopt, proxsuite::nullopt,
+                proxsuite::nullopt, proxsuite::nullopt);
+      qp.solve();
+      qp_iterations += static_cast<int>(qp.results.info.iter);
+    }
+    result.lam = qp.results.x;
+    if (!result.lam.allFinite()) {
+      result.lam.setZero(m);
+      result.own_converged = false;
+    }
+    result.iterations = outer;
+    result.stages.push_back({"proxqp (pyramid QPs)", qp_iterations,
+                             std::chrono::duration<double>(Clock::now() - start).count(), result.message});
+  }
+
+ private:
+  Eigen::MatrixXd C_, H_;
+  Eigen::VectorXd lower_, upper_, g_, s_, s_new_, u_;
+};
+
+}  // namespace
+
+std::unique_ptr<Formulation> makePyramidFormulation() { return std::make_unique<PyramidFormulation>(); }
+
+}  // namespace stiction
