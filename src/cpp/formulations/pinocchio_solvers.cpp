@@ -5,8 +5,8 @@
 //
 //   - Pinocchio solves  K ∋ lambda ⟂ u + Phi(u) ∈ K*,  u = G lambda + g  (Phi: De Saxce's
 //     shift with solve_ncp, else 0), so stiction's u = A lambda - b is passed as G = A (a
-//     DelassusOperatorDense, refilled from A at every call: ADMM adds its damping to the
-//     operator it is given) and g = -b. Rows follow the same convention: normal last.
+//     DelassusOperatorDense holding a copy of A, refilled at every call) and g = -b. Rows
+//     follow the same convention: normal last.
 //   - The constraint models only give the solvers their sizes and cones (a dense Delassus
 //     operator needs no kinematics): they are attached to a dummy model and calc() is never
 //     called. Block mapping (stiction -> Pinocchio):
@@ -18,8 +18,8 @@
 //       unilateral (1 row)               -> JointLimitConstraintModel with one lower limit:
 //                                           Pinocchio's only 1-row cone, the non-negative
 //                                           orthant (lambda >= 0 ⟂ u >= 0)
-//       planar friction, bilateral(k) with k not a multiple of 3: no Pinocchio counterpart
-//                                           (its friction cone is 3-D only), std::invalid_argument.
+//       planar friction                  -> none (Pinocchio's friction cone is 3-D only):
+//                                           std::invalid_argument, as for bilateral(k), 3 ∤ k
 //   - ADMM: Lanczos size 20 for the largest Delassus eigenvalue that sets its initial rho
 //     (Pinocchio's default is a full-size Lanczos); everything else at Pinocchio's defaults.
 //   - PGS is refused above 1000 rows: it symmetrizes the n x n Delassus matrix in a buffer
@@ -30,6 +30,17 @@
 //     max_iterations + 1 times; it is given max_iterations - 1). settings.time_limit cannot
 //     interrupt Pinocchio's loop and is not applied.
 //   - Warm start: result.lam on entry when it is non-zero (setConstraintImpulseGuess).
+//   - A non-symmetric A (some FCLib files): ADMM's Cholesky reads its lower triangle, PGS
+//     works on (A + A^T) / 2 (baselines.py).
+//   - result.iterations counts the iterations run: Pinocchio's `iterations` + 1 when it
+//     converged (its count is then the 0-based index of the last one), 0 when ADMM's guess
+//     passed its test before the loop, Pinocchio's count otherwise.
+//   - result.own_residual is what Pinocchio's stopping test compared with the tolerance: the
+//     smaller of its KKT measure and its step measure (own_law spells both out), so
+//     own_converged (Pinocchio's claim) <=> own_residual <= tolerance, up to the scale
+//     bookkeeping of its step test. PGS's KKT measure is taken per contact right after that
+//     contact's update in the sweep, so it can pass while the true residual is not small
+//     (cube with mu = 0: 1 sweep, exact-law residual 2e-3 ||b||).
 //
 // Pinocchio's PGS has no CCP mode: its solve_ncp setting only changes what it records with
 // stat_record; the iteration (normal update, then the tangential projection onto the disc
@@ -54,8 +65,11 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #endif
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
+#include <cstdio>
 #include <limits>
 #include <new>
 #include <sstream>
@@ -94,6 +108,28 @@ struct PgsSolver : pin::PGSConstraintSolver {
   const PGSSolverWorkspace& workspace() const { return m_workspace; }
 };
 
+/// The dense Delassus operator G = A, refilled in place when the size repeats: rebuild()
+/// reallocates its block-diagonal damping at every call. Its damping and compliance need no
+/// reset: compliance stays 0, PGS never damps, and ADMM sets its damping (updateDamping) before
+/// it first uses G, so what it left last time is never read.
+struct DenseOperator : pin::DelassusOperatorDense {
+  void refill(const Eigen::MatrixXd& A) {
+    if (rows() != A.rows() || cols() != A.cols()) {
+      rebuild(A);
+      return;
+    }
+    m_delassus_matrix = A;
+    m_cholesky_decomposition_dirty = true;
+  }
+};
+
+/// Append x in %.3g to s (no temporary string: the message buffer is reused across steps).
+void appendNumber(std::string& s, double x) {
+  char buf[32];
+  const int n = std::snprintf(buf, sizeof buf, "%.3g", x);
+  if (n > 0) s.append(buf, static_cast<std::size_t>(std::min<int>(n, sizeof buf - 1)));
+}
+
 /// The model every constraint refers to: a free-flying body (point contacts and anchors) and
 /// a revolute joint with a lower limit only (unilateral rows). Never evaluated.
 struct DummyModel {
@@ -131,7 +167,7 @@ std::string fmt(double x) {
 /// Bytes of stack left below this frame on the calling thread (max size_t when unknown).
 std::size_t remainingStack() {
 #if defined(__linux__)
-  thread_local const char* low = nullptr;
+  thread_local std::uintptr_t low = 0;  // the lowest address of this thread's stack
   thread_local bool known = false;
   if (!known) {
     known = true;
@@ -139,24 +175,24 @@ std::size_t remainingStack() {
     if (pthread_getattr_np(pthread_self(), &attr) == 0) {
       void* addr = nullptr;
       std::size_t size = 0;
-      if (pthread_attr_getstack(&attr, &addr, &size) == 0) low = static_cast<const char*>(addr);
+      if (pthread_attr_getstack(&attr, &addr, &size) == 0) low = reinterpret_cast<std::uintptr_t>(addr);
       pthread_attr_destroy(&attr);
     }
   }
-  if (low != nullptr) {
-    char here;
-    if (&here > low) return static_cast<std::size_t>(&here - low);
-  }
+  char here;
+  const auto at = reinterpret_cast<std::uintptr_t>(&here);
+  if (low != 0 && at > low) return static_cast<std::size_t>(at - low);
 #endif
   return std::numeric_limits<std::size_t>::max();
 }
 
-/// max(|a|_inf, |b|_inf) scaled step |a - b|_inf / that (0 when both are 0): the relative
-/// change Pinocchio's step test compares with its relative tolerance.
+/// |a - b|_inf / max(|a|_inf, |b|_inf) (0 when a = b): the relative change Pinocchio's step
+/// test compares with its relative tolerance.
 template <typename A, typename B>
 double relativeStep(const A& current, const B& previous) {
   const double step = (current - previous).template lpNorm<Eigen::Infinity>();
-  const double scale = std::max(current.template lpNorm<Eigen::Infinity>(), previous.template lpNorm<Eigen::Infinity>());
+  const double scale =
+      std::max(current.template lpNorm<Eigen::Infinity>(), previous.template lpNorm<Eigen::Infinity>());
   if (step == 0.0) return 0.0;
   return scale > 0.0 ? step / scale : std::numeric_limits<double>::infinity();
 }
@@ -232,25 +268,26 @@ class PinocchioFormulation final : public Formulation {
                                     where);
     }
 
+    // Built aside, swapped in when complete.
     const DummyModel& d = dummyModel();
-    layout_.clear();
-    models_.clear();
-    datas_.clear();
-    friction_model_.assign(cons.size(), 0);
+    std::vector<Block> layout;
+    std::vector<pin::ConstraintModel> models;
+    std::vector<pin::ConstraintData> datas;
+    std::vector<std::size_t> friction_model(cons.size(), 0);
     for (std::size_t i = 0; i < cons.size(); ++i) {
       const Constraint& c = cons[i];
       switch (c.kind) {
         case ConstraintKind::kSpatialFriction: {
           pin::PointContactConstraintModel contact(d.model, d.body);
           contact.setFriction(c.mu);
-          friction_model_[i] = models_.size();
-          models_.emplace_back(contact);
+          friction_model[i] = models.size();
+          models.emplace_back(contact);
           break;
         }
         case ConstraintKind::kBilateral: {
           int left = c.size;  // a multiple of 3
-          for (; left >= 6; left -= 6) models_.emplace_back(pin::FrameAnchorConstraintModel(d.model, d.body));
-          if (left == 3) models_.emplace_back(pin::PointAnchorConstraintModel(d.model, d.body));
+          for (; left >= 6; left -= 6) models.emplace_back(pin::FrameAnchorConstraintModel(d.model, d.body));
+          if (left == 3) models.emplace_back(pin::PointAnchorConstraintModel(d.model, d.body));
           break;
         }
         case ConstraintKind::kUnilateral: {
@@ -259,24 +296,26 @@ class PinocchioFormulation final : public Formulation {
           if (limit.residualSize() != 1)
             throw std::runtime_error(name() + ": internal error, the joint-limit model has " +
                                      std::to_string(limit.residualSize()) + " rows instead of 1");
-          models_.emplace_back(limit);
+          models.emplace_back(limit);
           break;
         }
         case ConstraintKind::kPlanarFriction: break;  // refused above
       }
-      layout_.push_back({c.kind, c.size, c.mu});
+      layout.push_back({c.kind, c.size, c.mu});
     }
-    datas_.reserve(models_.size());
+    datas.reserve(models.size());
     Eigen::Index rows = 0;
-    for (const auto& m : models_) {
-      datas_.push_back(m.createData());
+    for (const auto& m : models) {
+      datas.push_back(m.createData());
       rows += m.residualSize();
     }
-    if (rows != problem.numRows()) {
-      layout_.clear();  // force a rebuild next time
+    if (rows != problem.numRows())
       throw std::runtime_error(name() + ": internal error, the Pinocchio constraints have " + std::to_string(rows) +
                                " rows, the problem " + std::to_string(problem.numRows()));
-    }
+    layout_.swap(layout);
+    models_.swap(models);
+    datas_.swap(datas);
+    friction_model_.swap(friction_model);
   }
 
   void run(const ContactProblem& problem, const SolverSettings& settings, SolverResult& result) {
@@ -297,12 +336,14 @@ class PinocchioFormulation final : public Formulation {
                                     "or use pinocchio-admm");
     }
     updateLayout(problem);
+    if (result.lam.size() != m) result.lam = Eigen::VectorXd::Zero(m);  // the driver sizes it
     result.own_law = admm_ ? "Pinocchio ADMM's stopping test, min(KKT, step) <= tolerance: KKT = max(complementarity, "
                              "dual feasibility / (1 + max(|g|, |z|)), primal feasibility / (1 + max(|x|, |y|))), "
                              "step = max relative change of x, y, z (inf-norms, Pinocchio's own quantities)"
-                           : "Pinocchio PGS's stopping test, min(KKT, step) <= tolerance: KKT = max(dual feasibility, "
-                             "complementarity), absolute (Pinocchio's per-contact measures, De Saxce-corrected), "
-                             "step = |lambda - lambda_prev| / max(|lambda|, |lambda_prev|) (inf-norms)";
+                           : "Pinocchio PGS's stopping test, min(KKT, step) <= tolerance: KKT = max over contacts of "
+                             "dual feasibility and complementarity (absolute, De Saxce-corrected, each taken right "
+                             "after that contact's update in the sweep), step = |lambda - lambda_prev| / "
+                             "max(|lambda|, |lambda_prev|) (inf-norms)";
     if (m == 0) {
       result.iterations = 0;
       result.own_converged = true;
@@ -318,7 +359,7 @@ class PinocchioFormulation final : public Formulation {
       return;
     }
 
-    delassus_.rebuild(problem.delassus().dense());  // resets the damping ADMM added last time
+    delassus_.refill(problem.delassus().dense());
     g_.resize(m);
     g_ = -problem.b();
     const bool guess = (result.lam.array() != 0.0).any();
@@ -383,7 +424,8 @@ class PinocchioFormulation final : public Formulation {
         const double z_inf = r.z.lpNorm<Eigen::Infinity>();
         const double x_inf = r.x.lpNorm<Eigen::Infinity>();
         const double y_inf = r.y.lpNorm<Eigen::Infinity>();
-        kkt = std::max({complementarity, dual / (1.0 + std::max(g_inf, z_inf)), primal / (1.0 + std::max(x_inf, y_inf))});
+        kkt = std::max({complementarity, dual / (1.0 + std::max(g_inf, z_inf)),
+                        primal / (1.0 + std::max(x_inf, y_inf))});
         const auto& ws = admm_solver_.workspace();
         step = std::max({relativeStep(ws.x, ws.x_previous), relativeStep(ws.y, ws.y_previous),
                          relativeStep(ws.z, ws.z_previous)});
@@ -397,17 +439,31 @@ class PinocchioFormulation final : public Formulation {
     result.own_residual = std::isnan(own) ? std::numeric_limits<double>::infinity() : own;
     result.own_converged = converged;
 
+    // The message, built in place (no allocation once its buffer has grown).
+    std::string& msg = result.message;
+    msg.clear();
     if (!result.lam.allFinite()) {
       result.own_converged = false;
-      result.message = std::string(solverName()) + " returned non-finite impulses after " +
-                       std::to_string(result.iterations) + " iterations";
+      msg.append(solverName()).append(" returned non-finite impulses after ");
+      appendNumber(msg, result.iterations);
+      msg.append(" iterations");
     } else if (converged) {
-      result.message = before_loop ? "converged (" + std::string(solverName()) + ": the warm start passes its test)"
-                                   : "converged (" + std::string(solverName()) + ", " +
-                                         (kkt <= tol ? "KKT test" : "step test: relative change " + fmt(step)) + ")";
+      msg.append("converged (").append(solverName());
+      if (before_loop) {
+        msg.append(": the warm start passes its test)");
+      } else if (kkt <= tol) {
+        msg.append(", KKT test)");
+      } else {
+        msg.append(", step test: relative change ");
+        appendNumber(msg, step);
+        msg.append(")");
+      }
     } else {
-      result.message = "iteration limit reached (" + std::string(solverName()) + ", KKT " + fmt(kkt) + ", step " +
-                       fmt(step) + ")";
+      msg.append("iteration limit reached (").append(solverName()).append(", KKT ");
+      appendNumber(msg, kkt);
+      msg.append(", step ");
+      appendNumber(msg, step);
+      msg.append(")");
     }
   }
 
@@ -419,7 +475,7 @@ class PinocchioFormulation final : public Formulation {
   std::vector<pin::ConstraintModel> models_;
   std::vector<pin::ConstraintData> datas_;
 
-  pin::DelassusOperatorDense delassus_;
+  DenseOperator delassus_;
   Eigen::VectorXd g_;
 
   AdmmSolver admm_solver_;
