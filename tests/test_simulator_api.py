@@ -39,7 +39,16 @@ def test_every_override_takes_effect():
     assert Simulator("cube-slide", mode="ode").settings.mode.name == "rk4"
     assert Simulator("cube-slide", duration=0.25).rollout().t[-1] == pytest.approx(0.25)
     assert set(OVERRIDES) == {"dt", "duration", "mode", "delta", "zeta", "mu", "tolerance", "max_iterations",
-                              "solver", "ode_tolerance"}
+                              "solver", "ode_tolerance", "formulation", "pyramid_facets", "pyramid_inscribed",
+                              "penalty_stiffness", "penalty_damping"}
+    # the formulation and its parameters (one formulation at a time: the others' parameters are refused)
+    for name, params in (("pyramid", {"pyramid_facets": 8, "pyramid_inscribed": True}),
+                         ("penalty", {"penalty_stiffness": 3e4, "penalty_damping": 2e-3})):
+        sim = Simulator("cube-slide", formulation=name, **params)
+        assert sim.settings.formulation == name != base.settings.formulation
+        fs, default = sim.settings.formulation_settings, base.settings.formulation_settings
+        for key, value in params.items():
+            assert getattr(fs, key) == value != getattr(default, key), key
 
 
 def test_mu_override_changes_the_physics():

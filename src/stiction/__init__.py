@@ -12,6 +12,8 @@ from ._core import (  # noqa: F401
     ContactProblem,
     ContactState,
     ExactLawMeasures,
+    Formulation,
+    FormulationSettings,
     SolveStatus,
     Solver,
     SolverResult,
@@ -23,6 +25,7 @@ from ._core import (  # noqa: F401
     rk4_stable_step,
     solver_names,
 )
+from .formulations import formulation_infos, formulation_names  # noqa: F401
 from .solve import solve, spatial_problem  # noqa: F401
 
 __version__ = "0.1.0"

@@ -161,6 +161,24 @@ class ExactLawMeasures:
     def w(self) -> numpy.ndarray: ...
 
 
+class Formulation:
+    """One formulation (exact, ccp, nakaoka, pyramid, penalty, pinocchio-admm, ...) with its workspace; solve() judges every result by the exact law."""
+    def __init__(self, name: str, settings: Any = ...) -> None: ...
+    @property
+    def name(self) -> str: ...
+
+    def solve(self, problem: ContactProblem, settings: Any, guess: numpy.typing.ArrayLike | None = ..., h: Any = ..., position_error: Any = ...) -> SolverResult: ...
+
+class FormulationSettings:
+    """Parameters of the formulations (stiction formulations lists them)."""
+    def __init__(self) -> None: ...
+    exact_solver: str
+    penalty_damping: float
+    penalty_stiffness: float
+    pyramid_facets: int
+    pyramid_inscribed: bool
+    pyramid_max_fixed_point: int
+
 class GeometryPairContact:
     """A collision pair of the GeometryModel handled by coal (general shapes)."""
     def __init__(self) -> None: ...
@@ -312,6 +330,8 @@ class SimulatorSettings:
     activation_distance: float
     delta: float
     dt: float
+    formulation: str
+    formulation_settings: FormulationSettings
     implicit_pd: bool
     max_iterations: int
     min_dt: float
@@ -362,6 +382,15 @@ class SolverResult:
 
     @property
     def min_solution_norm(self) -> float: ...
+
+    @property
+    def own_converged(self) -> bool: ...
+
+    @property
+    def own_law(self) -> str: ...
+
+    @property
+    def own_residual(self) -> float: ...
 
     @property
     def precision_floor(self) -> float: ...
@@ -451,6 +480,9 @@ def build_contact_problem(sim: SimulatorModel, data: SimulatorData, q: numpy.typ
 
 def exact_law_measures(problem: ContactProblem, lam: numpy.typing.ArrayLike, relative_speed_floor: float = ...) -> ExactLawMeasures:
     """How far lam is from the exact Coulomb law, part by part (ExactLawMeasures): natural map, primal and dual feasibility, complementarity, Signorini, maximum dissipation and lift-off of sliding blocks."""
+
+def formulation_infos() -> list:
+    """One dict per formulation: name, equations (the paper's), summary, parameters."""
 
 def residual(problem: ContactProblem, lam: numpy.typing.ArrayLike) -> float:
     """natural-map residual of the De Saxce problem / (1 + ||b||)"""

@@ -1,5 +1,5 @@
 """Command line: ``stiction demo``, ``stiction simulate SCENE``, ``stiction scenes``, ``stiction fclib FILE...``,
-``stiction solvers``.
+``stiction solvers``, ``stiction formulations``, ``stiction casestudy NAME``.
 
 Exit codes: 0 success; 1 the computation ran but did not succeed (a solve that missed its
 tolerance, a simulation that diverged), always with a one-line reason on stderr; 2 bad input
@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 
-from . import fclib, solver_names, solve
+from . import fclib, formulation_infos, formulation_names, solver_names, solve
 from ._optional import MissingExtraError, require
 
 from .resources import DEMO_FCLIB_PROBLEMS as DEMO_PROBLEMS  # one per family that shows something
@@ -185,8 +185,12 @@ def cmd_simulate(args) -> int:
         require("matplotlib", "plot", "--plot")
     if args.save:
         _output_path("--save", args.save, (".npz",))
-    overrides = {k: getattr(args, k) for k in ("dt", "mode", "delta", "zeta", "mu", "duration", "solver")
+    overrides = {k: getattr(args, k) for k in ("dt", "mode", "delta", "zeta", "mu", "duration", "solver",
+                                               "formulation", "pyramid_facets", "penalty_stiffness",
+                                               "penalty_damping")
                  if getattr(args, k) is not None}
+    if args.pyramid_inscribed:
+        overrides["pyramid_inscribed"] = True
     if args.tol is not None:
         overrides["tolerance"] = args.tol
     sim = Simulator(args.scene, **overrides)
@@ -249,6 +253,20 @@ def cmd_casestudy(args) -> int:
     if failed:
         print(f"stiction casestudy: {args.name}: {len(failed)} check(s) failed: {'; '.join(failed)}", file=sys.stderr)
         return 1
+    return 0
+
+
+def cmd_formulations(args) -> int:
+    infos = formulation_infos()
+    if args.json:
+        json.dump(infos, sys.stdout, indent=1)
+        sys.stdout.write("\n")
+        return 0
+    for f in infos:
+        print(f"{f['name']:20s} eq. {f['equations']:16s} {f['summary']}")
+        for prm in f["parameters"]:
+            print(f"{'':24s}- {prm}")
+    print("\nEvery result is judged by the exact law (eq. 65); `--formulation NAME` in `stiction simulate`.")
     return 0
 
 
@@ -332,6 +350,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--mu", type=nonneg, help="friction coefficient of every contact (default: the scene's)")
     p.add_argument("--solver", choices=solver_names(), help="contact solver (default: default)")
     p.add_argument("--tol", type=positive, help="contact solver tolerance (default 1e-10)")
+    p.add_argument("--formulation", choices=formulation_names(),
+                   help="how each step is resolved (default exact; see `stiction formulations`)")
+    p.add_argument("--pyramid-facets", type=_positive_int, help="pyramid: facets per cone (default 4)")
+    p.add_argument("--pyramid-inscribed", action="store_true",
+                   help="pyramid: corners on the cone (default: facets tangent to it)")
+    p.add_argument("--penalty-stiffness", type=positive, help="penalty: K in N/m (default 1e5)")
+    p.add_argument("--penalty-damping", type=nonneg, help="penalty: beta in s (default 1e-3)")
     p.add_argument("--record", metavar="FILE.html", help="write a self-contained meshcat recording")
     p.add_argument("--plot", metavar="FILE.png", help="plot base position, foot slip, contact forces")
     p.add_argument("--save", metavar="FILE.npz", help="save the trajectory")
@@ -348,6 +373,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", action="store_true", help="print name, equations, checks and points as JSON")
     p.add_argument("--quick", action="store_true", help="a smaller sweep (same checks)")
     p.set_defaults(func=cmd_casestudy)
+
+    p = sub.add_parser("formulations", help="list the formulations: name, the paper's equations, parameters")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_formulations)
 
     p = sub.add_parser("solvers", help="list the solver names")
     p.set_defaults(func=cmd_solvers)

@@ -13,6 +13,9 @@ import pinocchio as pin
 
 from . import _core
 from .scene import Scene, load_scene
+from .formulations import PARAMETERS as FORMULATION_PARAMETERS
+from .formulations import check_name as check_formulation
+from .formulations import settings_for as formulation_settings
 from .scene_schema import did_you_mean
 
 _VECTOR_KEYS = ("t", "residual", "iterations", "converged", "dt")
@@ -82,7 +85,13 @@ OVERRIDES = {
     "max_iterations": "contact solver iteration budget per solve",
     "solver": "contact solver name (stiction.solver_names())",
     "ode_tolerance": "adaptive mode: local error tolerance",
+    "formulation": "how each step's problem is resolved (stiction.formulation_names(); default exact)",
+    "pyramid_facets": "pyramid formulation: facets per friction cone (>= 3, default 4)",
+    "pyramid_inscribed": "pyramid formulation: corners on the cone (True) or facets tangent to it (False, default)",
+    "penalty_stiffness": "penalty formulation: K in N/m per contact (default 1e5)",
+    "penalty_damping": "penalty formulation: beta in s, damping K beta (default 1e-3)",
 }
+
 _MODES = {"timestep": 0, "rk4": 1, "ode": 1, "adaptive": 2}
 MAX_RECORD_BYTES = 4e9  # a trajectory larger than this is refused before simulating
 MAX_STEPS = 1e9  # steps in one rollout (a C++ int counts them; a typo'd dt must not hang or overflow)
@@ -112,7 +121,8 @@ class _ReadOnly:
                              f"build a new Simulator(scene, {name}=...) instead")
 
     def __repr__(self) -> str:
-        keys = ("dt", "mode", "delta", "zeta", "tolerance", "max_iterations", "solver", "ode_tolerance")
+        keys = ("dt", "mode", "delta", "zeta", "tolerance", "max_iterations", "solver", "formulation",
+                "ode_tolerance")
         return "SimulatorSettings(" + ", ".join(f"{k}={getattr(self._settings, k)!r}" for k in keys) + ")"
 
 
@@ -120,7 +130,11 @@ class Simulator:
     """A scene (name, TOML path or Scene) with its C++ model (immutable) and data (state).
 
     Overrides (keyword arguments; anything else is an error): see ``OVERRIDES`` —
-    dt, duration, mode, delta, zeta, mu, tolerance, max_iterations, solver, ode_tolerance.
+    dt, duration, mode, delta, zeta, mu, tolerance, max_iterations, solver, ode_tolerance,
+    formulation (exact, ccp, nakaoka, pyramid, penalty, pinocchio-admm, ...: docs/formulations.md)
+    and its parameters pyramid_facets, pyramid_inscribed, penalty_stiffness, penalty_damping.
+    With another formulation than exact, ``converged`` (per step) is the formulation's own
+    stopping test and ``residual`` stays the exact law's, the same yardstick for all.
 
     State: ``sim.data.q``, ``.v``, ``.t`` and the control vectors (``kp``, ``kd``, ``q_target``,
     ``v_target``, ``tau_ff``) read as *copies* (numpy arrays detached from the simulator: changing
@@ -174,6 +188,13 @@ class Simulator:
         if solver not in _core.solver_names():
             raise ValueError(f"solver must be one of {', '.join(_core.solver_names())}, got {solver!r}")
         s.solver = solver
+        formulation = check_formulation(overrides.get("formulation", "exact"))
+        s.formulation = formulation
+        fs = formulation_settings(formulation, {k: overrides[k] for k in FORMULATION_PARAMETERS if k in overrides})
+        s.formulation_settings = fs
+        if formulation == "penalty" and mode != "timestep":
+            raise ValueError("the penalty formulation integrates its springs by implicit Euler over the time "
+                             "step (eq. 83-84, Kikuuwe-Fujimoto): it needs mode 'timestep'")
         if "ode_tolerance" in overrides:
             s.ode_tolerance = _positive("ode_tolerance", overrides["ode_tolerance"])
         return s
@@ -334,6 +355,7 @@ class Simulator:
         out = {
             "scene": sc.name,
             "mode": {0: "timestep", 1: "rk4", 2: "adaptive"}[int(self.settings.mode)],
+            "formulation": self.settings.formulation,
             "dt": self.settings.dt,
             "duration": float(traj.t[-1] - traj.t[0]),
             "steps": int(len(traj.t) - 1),

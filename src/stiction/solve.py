@@ -7,9 +7,11 @@ from typing import Sequence
 
 import numpy as np
 
-from ._core import Constraint, ContactProblem, Solver, SolverResult, SolverSettings, WarmStart, solver_names
+from ._core import (Constraint, ContactProblem, Formulation, Solver, SolverResult, SolverSettings, WarmStart,
+                    solver_names)
 
 _solvers: dict[str, Solver] = {}
+_formulations: dict[tuple, Formulation] = {}
 
 
 def _type_name(x) -> str:
@@ -82,8 +84,13 @@ def solve(
     max_iter: int = 2000,
     warm_start: str | np.ndarray | None = None,
     time_limit: float = 0.0,
+    formulation: str = "exact",
+    h: float | None = None,
+    position_error=None,
+    **formulation_parameters,
 ) -> SolverResult:
-    """Solve A lambda - b in -lim N_C^{U_eps}(lambda) (eq. 65).
+    """Solve A lambda - b in -lim N_C^{U_eps}(lambda) (eq. 65), or resolve the problem by another
+    formulation (docs/formulations.md).
 
     tol: on the relative natural map plus its rounding bound (result.converged means the
     exact natural map at result.lam is within tol * ||b||; docs/solvers.md).
@@ -92,6 +99,14 @@ def solve(
     time_limit: seconds for the whole solve, every stage included (0: none).
     The solver objects (and their workspaces) are reused across calls.
     Wrong kinds of argument raise TypeError, wrong values ValueError, naming the argument.
+
+    formulation: "exact" (default; `solver` picks the algorithm) or ccp, nakaoka, pyramid, penalty,
+    pinocchio-admm, pinocchio-pgs, pinocchio-admm-ccp (stiction.formulation_names()).
+    Whatever the formulation, result.residual / converged / status judge lambda by the exact law;
+    result.own_converged / own_residual / own_law are the formulation's own verdict.
+    formulation_parameters: pyramid_facets, pyramid_inscribed (pyramid), penalty_stiffness,
+    penalty_damping (penalty). h: the step the impulses span (penalty needs it: its springs have
+    units); position_error: Psi per row (penalty: the gaps, which u = A P - b contains as Psi / h).
     """
     if not isinstance(problem, ContactProblem):
         raise TypeError(f"solve: problem must be a stiction.ContactProblem, got {_type_name(problem)}")
@@ -122,6 +137,9 @@ def solve(
                              f"the problem has {problem.num_rows} rows")
         start = WarmStart.given
     settings = _settings(tol, max_iter, time_limit, start)
+    if formulation != "exact" or formulation_parameters or h is not None or position_error is not None:
+        return _solve_formulation(problem, solver, settings, guess, formulation, h, position_error,
+                                  formulation_parameters)
     if solver not in _solvers:
         _solvers[solver] = Solver(solver)
     return _solvers[solver].solve(problem, settings, guess)
@@ -145,3 +163,35 @@ def _settings(tol: float, max_iter: int, time_limit: float, start) -> SolverSett
         settings.warm_start = start
         _settings_cache[key] = settings
     return settings
+
+
+def _solve_formulation(problem, solver, settings, guess, formulation, h, position_error, params) -> SolverResult:
+    from .formulations import check_name, settings_for
+
+    formulation = check_name(formulation)
+    fs = settings_for(formulation, params)
+    if formulation == "exact":
+        fs.exact_solver = solver
+    elif solver != "default":
+        raise ValueError(f"solve: solver={solver!r} picks the exact law's algorithm; the {formulation} "
+                         "formulation has its own")
+    if h is None:
+        if formulation == "penalty":
+            raise ValueError("solve: the penalty formulation needs h, the step the impulses span (its spring "
+                             "stiffness K and damping beta have units)")
+        h = 1.0
+    h = _real(h, "solve: h")
+    if not (h > 0 and math.isfinite(h)):
+        raise ValueError(f"solve: h must be a positive finite number of seconds, got {h}")
+    if position_error is not None:
+        position_error = _as_float_array(position_error, "solve: position_error", 1)
+        if position_error.shape[0] != problem.num_rows:
+            raise ValueError(f"solve: position_error has {position_error.shape[0]} entries, the problem has "
+                             f"{problem.num_rows} rows")
+    key = (formulation, solver, tuple(sorted((k, v) for k, v in params.items() if v is not None)))
+    f = _formulations.get(key)
+    if f is None:
+        if len(_formulations) > 64:
+            _formulations.clear()
+        f = _formulations[key] = Formulation(formulation, fs)
+    return f.solve(problem, settings, guess, h, position_error)

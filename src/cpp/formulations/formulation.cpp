@@ -40,10 +40,9 @@ const std::vector<Entry>& registry() {
        [] { return makePinocchioFormulation("admm", true); }},
       {{"pinocchio-pgs", "73-77", "Pinocchio 4.1's PGSConstraintSolver, NCP setting (solve_ncp)", {}},
        [] { return makePinocchioFormulation("pgs", true); }},
+      // (Pinocchio 4.1's PGS has no CCP setting: its iteration is the NCP whatever solve_ncp says)
       {{"pinocchio-admm-ccp", "78-79", "Pinocchio 4.1's ADMMConstraintSolver, CCP setting", {}},
        [] { return makePinocchioFormulation("admm", false); }},
-      {{"pinocchio-pgs-ccp", "78-79", "Pinocchio 4.1's PGSConstraintSolver, CCP setting", {}},
-       [] { return makePinocchioFormulation("pgs", false); }},
   };
   return entries;
 }

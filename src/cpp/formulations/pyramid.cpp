@@ -25,6 +25,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 
 #include <proxsuite/proxqp/dense/dense.hpp>
 
@@ -155,8 +156,10 @@ class PyramidFormulation final : public Formulation {
         break;
       }
       if (outer >= settings_.pyramid_max_fixed_point) {
+        char buf[64];
+        std::snprintf(buf, sizeof buf, "%.3g", result.own_residual);
         result.message = "fixed point on the De Saxce term did not settle in " + std::to_string(outer) +
-                         " QP solves (LCP residual " + std::to_string(result.own_residual) + " x ||b||)";
+                         " QP solves (LCP residual " + buf + " x ||b||)";
         break;
       }
       if (settings.time_limit > 0.0 &&

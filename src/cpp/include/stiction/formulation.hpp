@@ -9,7 +9,7 @@
 //             Anitescu-Potra LCP (§4.5)
 //   penalty   spring-damper normal and friction (eq. 83-84), implicit Euler as
 //             Kikuuwe-Fujimoto (closed form per contact through relation (4))
-//   pinocchio-admm, pinocchio-pgs   Pinocchio's own solvers, NCP setting (and -ccp variants)
+//   pinocchio-admm, pinocchio-pgs   Pinocchio's own solvers, NCP setting (pinocchio-admm-ccp: its CCP)
 //
 // Every formulation is a ContactSolver (solver.hpp): solve() runs it and then judges the
 // result by the exact law, the same yardstick for all (result.residual, status, states; the
@@ -73,7 +73,7 @@ struct FormulationInfo {
 };
 
 /// "exact" (the solver named by settings.exact_solver), "ccp", "nakaoka", "pyramid",
-/// "penalty", "pinocchio-admm", "pinocchio-pgs", "pinocchio-admm-ccp", "pinocchio-pgs-ccp".
+/// "penalty", "pinocchio-admm", "pinocchio-pgs", "pinocchio-admm-ccp".
 /// Throws std::invalid_argument naming the known ones, or a bad parameter.
 std::unique_ptr<ContactSolver> makeFormulation(const std::string& name, const FormulationSettings& settings = {});
 std::vector<FormulationInfo> formulationInfos();
