@@ -121,6 +121,9 @@ def test_penalty_drift(result):
     for p in pen:
         assert p["drift"] * p["K"] / (0.9 * 0.5 * G) == pytest.approx(1.0, abs=1e-6)
         assert p["max_force_ratio"] < 1.0
+        # the package's own penalty formulation: the same drift, and a normal spring m g / K
+        assert p["simulator_drift"] == pytest.approx(p["drift"], rel=1e-9)
+        assert p["simulator_penetration"] == pytest.approx(1.0 * G / p["K"], rel=1e-9)
     rest = [p for p in result.points if p["case"] == "relaxed-at-rest"]
     assert rest and all(p["drift"] <= 1e-12 for p in rest)
 

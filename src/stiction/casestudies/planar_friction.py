@@ -43,7 +43,9 @@ qddot + qdot/delta), mode ``rk4`` (dt = delta/20) and ``adaptive``, at delta = 1
    (the first line is lambda = proj_{F B}(K e_k - K (h + beta) v+) solved for v+). At rest
    lambda = K e = -f_e: the mass has drifted by ||f_e|| / K from where it started, for every K
    (drift x K / ||f_e|| = 1, slope -1 in log-log), as long as the spring never slips (beta is
-   chosen so that the smallest K is overdamped, damping ratio 2: no overshoot past F).
+   chosen so that the smallest K is overdamped, damping ratio 2: no overshoot past F). The
+   package's own penalty formulation (``formulation="penalty"``, eq. 83-84 in C++) run on the same
+   point mass must give the same drift.
 
 Points (``CaseStudyResult.points``):
 
@@ -61,8 +63,12 @@ Points (``CaseStudyResult.points``):
   max_cross_velocity}`` — m/s^2; the velocity across f_e (m/s).
 - ``{"case": "relaxed-at-rest", mode, delta, force_ratio: 0.9, drift}`` — m after ``REST_DURATION``.
 - ``{"case": "penalty", K, beta, h, force_ratio: 0.9, drift, predicted_drift, max_force_ratio,
-  final_speed}`` — drift in m, ``predicted_drift`` = ||f_e|| / K, ``max_force_ratio`` max ||lambda|| / F
-  over the run (< 1: the spring never slipped).
+  final_speed, simulator_drift, simulator_max_force_ratio, simulator_penetration}`` — drift in m,
+  ``predicted_drift`` = ||f_e|| / K, ``max_force_ratio`` max ||lambda|| / F over the run (< 1: the
+  spring never slipped); ``simulator_*`` the same run with the package's own penalty formulation
+  (``Simulator(scene, mode="timestep", formulation="penalty", penalty_stiffness=K,
+  penalty_damping=beta)``, eq. 83-84 in C++, which also puts a normal spring under the mass:
+  ``simulator_penetration`` = m g / K).
 """
 from __future__ import annotations
 
@@ -278,6 +284,21 @@ def penalty_runs(Ks: np.ndarray, f_e: np.ndarray, beta: float, h: float = PENALT
     return {"x": x, "v": v, "e": e, "max_force_ratio": max_lam / F_BOUND}
 
 
+def penalty_simulator_run(K: float, f_e: np.ndarray, beta: float, h: float = PENALTY_H,
+                          duration: float = PENALTY_DURATION) -> dict:
+    """The same experiment with the package's own penalty formulation (eq. 83-84 in C++,
+    ``Simulator(..., mode="timestep", formulation="penalty")``): the point mass from rest."""
+    scene = scene_from_model(point_mass_model(), name="point-mass", spheres=[("mass", 0.0)], mu=MU)
+    sim = Simulator(scene, mode="timestep", dt=h, formulation="penalty", penalty_stiffness=float(K),
+                    penalty_damping=float(beta))
+    sim.data.tau_ff = np.array([f_e[0], f_e[1], 0.0])
+    sim.set_state(q=np.zeros(3), v=np.zeros(3), t=0.0)
+    traj = sim.rollout(duration)
+    return {"drift": float(np.linalg.norm(traj.q[-1, :2] - traj.q[0, :2])),
+            "max_force_ratio": float(np.linalg.norm(traj.lam[:, 0, :2], axis=1).max() / F_BOUND),
+            "penetration": float(-traj.q[-1, 2]), "all_converged": bool(traj.converged[1:].all())}
+
+
 def run(quick: bool = False) -> CaseStudyResult:
     deltas = (1e-2, 3e-3) if quick else (1e-2, 1e-3)
     modes = ("rk4", "adaptive")
@@ -300,6 +321,11 @@ def run(quick: bool = False) -> CaseStudyResult:
                 "final_speed": float(np.linalg.norm(vf))}
                for K, d, p, r, vf in zip(Ks, drift, predicted, pen["max_force_ratio"], pen["v"])]
     slope = float(np.polyfit(np.log(Ks), np.log(drift), 1)[0])
+    package = [penalty_simulator_run(K, f_e, beta) for K in Ks]
+    for p, q in zip(penalty, package):
+        p.update({"simulator_drift": q["drift"], "simulator_max_force_ratio": q["max_force_ratio"],
+                  "simulator_penetration": q["penetration"]})
+    package_difference = max(abs(q["drift"] - d) / d for q, d in zip(package, drift))
 
     checks = []
     for r in relaxed:
@@ -341,7 +367,10 @@ def run(quick: bool = False) -> CaseStudyResult:
         Check("penalty: log-log slope of drift vs K (model: drift = ||f_e|| / K)", slope, -1.0, 1e-6),
         Check("penalty: largest ||lambda|| / F (the spring never slips)", float(pen["max_force_ratio"].max()), 1.0,
               0.0, "<="),
-        Check("every relaxed rollout converged", float(all(r["all_converged"] for r in relaxed + sliding)), 1.0, 0.0),
+        Check("penalty: the package's formulation='penalty' (Simulator, timestep h) vs this model C, "
+              "max relative drift difference over K", package_difference, 0.0, 1e-9),
+        Check("every rollout converged (relaxed and penalty formulation)",
+              float(all(r["all_converged"] for r in relaxed + sliding + package)), 1.0, 0.0),
     ]
     notes = [
         f"m = {MASS:g} kg, mu = {MU:g}, F = mu m g = {F_BOUND:.6g} N; v0 = {V0.tolist()} m/s, f_e at "
@@ -385,6 +414,8 @@ def plot(result: CaseStudyResult, path) -> None:
     pen = [p for p in result.points if p["case"] == "penalty"]
     K = np.array([p["K"] for p in pen])
     ax2.loglog(K, [p["drift"] for p in pen], "o", label="penalty model C (implicit Euler), measured")
+    ax2.loglog(K, [p["simulator_drift"] for p in pen], "x", color="C3", ms=9,
+               label="the package's formulation='penalty' (Simulator, timestep)")
     ax2.loglog(K, [p["predicted_drift"] for p in pen], "k-", lw=1, label="||f_e|| / K")
     rest = [p for p in result.points if p["case"] == "relaxed-at-rest"]
     for p in rest:
