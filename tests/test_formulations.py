@@ -77,6 +77,10 @@ def test_every_result_is_judged_by_the_exact_law_and_its_own(name):
     r = stiction.solve(rp.problem, formulation=name, **kw)
     m = stiction.exact_law_measures(rp.problem, r.lam)
     assert r.relative_residual == pytest.approx(m.relative_residual, rel=1e-12, abs=1e-300)
+    carried = r.exact_law  # the same measures, carried by every result
+    for key in ("natural_map", "relative_residual", "primal_max", "dual_max", "complementarity_max",
+                "signorini_max", "dissipation_max", "liftoff_max", "num_sliding"):
+        assert getattr(carried, key) == getattr(m, key), key
     assert r.converged == (r.relative_residual + r.residual_bound <= 1e-10)
     assert r.own_converged, (name, r.message)
     assert r.own_residual <= 1e-10 and r.own_law

@@ -366,6 +366,9 @@ class SolverResult:
     def converged(self) -> bool: ...
 
     @property
+    def exact_law(self) -> ExactLawMeasures: ...
+
+    @property
     def implicated_blocks(self) -> list: ...
 
     @property

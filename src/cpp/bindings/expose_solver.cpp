@@ -224,7 +224,9 @@ void exposeSolver() {
       .def_readonly("own_converged", &SolverResult::own_converged,
                     "the formulation met its own stopping test (exact solvers: = converged)")
       .def_readonly("own_residual", &SolverResult::own_residual, "the formulation's own measure (own_law)")
-      .def_readonly("own_law", &SolverResult::own_law, "what own_residual measures");
+      .def_readonly("own_law", &SolverResult::own_law, "what own_residual measures")
+      .add_property("exact_law", +[](const SolverResult& r) { return r.exact_law; },
+                    "ExactLawMeasures at lam (the same yardstick for every formulation)");
   {
     bp::class_<FormulationSettings> fs("FormulationSettings",
                                        "Parameters of the formulations (stiction formulations lists them).");

@@ -247,6 +247,7 @@ void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSet
     result.own_converged = false;
   }
   result.divergence_candidates.clear();
+  measureExactLaw(problem, result.lam, result.exact_law);
   result.seconds = elapsed();
 }
 

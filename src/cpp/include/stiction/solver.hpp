@@ -9,6 +9,7 @@
 #include <Eigen/Core>
 
 #include "stiction/contact_problem.hpp"
+#include "stiction/exact_law.hpp"
 #include "stiction/verdict.hpp"
 
 namespace stiction {
@@ -68,6 +69,9 @@ struct SolverResult {
   bool own_converged = false;
   double own_residual = 0.0;      ///< the formulation's own measure, relative (own_law says which)
   std::string own_law;            ///< what own_residual measures
+  /// The exact law's measures at lam, part by part (exact_law.hpp), whatever produced it:
+  /// the same yardstick for every formulation, computed by the driver.
+  ExactLawMeasures exact_law;
 
   /// Set by the algorithms: iterates that ran away, or ProxQP's ray of unboundedness;
   /// the verdict tests them as infeasibility certificates.
