@@ -11,7 +11,8 @@ Each case study is a module of this package with
 ``stiction casestudy NAME [--plot FILE.png] [--json] [--quick]`` runs one; the exit code is 1
 when a check fails. The JSON is ``CaseStudyResult.to_json()``:
 ``{name, title, equations, passed, checks: [{quantity, measured, expected, error, tolerance,
-passed}], points: [...], notes}``. docs/casestudies.md documents each one's points.
+passed}], points: [...], notes}``. docs/casestudies/ has a page per case study (its points,
+measured numbers, figure) and an index (README.md).
 """
 from __future__ import annotations
 
