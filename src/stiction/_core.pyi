@@ -478,6 +478,9 @@ class WarmStart(int):
     names: ClassVar[dict[str, WarmStart]]
     values: ClassVar[dict[int, WarmStart]]
 
+def batch_rollout(sims: Any, datas: Any, n_steps: int, record_every: int = ..., threads: Any = ...) -> list:
+    """independent rollouts of (sims[i], datas[i]) on a pool of C++ threads (0: one per core), the GIL released; a list of dicts as rollout's, each with 'error' (None, or why it stopped)"""
+
 def build_contact_problem(sim: SimulatorModel, data: SimulatorData, q: numpy.typing.ArrayLike, v: numpy.typing.ArrayLike, delta: float, zeta: float) -> None:
     """fill data.J, A, b (eq. 27), drift, position_error and active at (q, v)"""
 
@@ -494,7 +497,7 @@ def rk4_stable_step(delta: float, zeta: float = ...) -> float:
     """the largest dt SimulatorModel accepts in rk4 mode: 0.75 x RK4's stability limit on eq. 64"""
 
 def rollout(sim: SimulatorModel, data: SimulatorData, n_steps: int, record_every: int = ...) -> dict:
-    """n steps in C++; returns a dict of arrays (t, q, v, lam, gaps, states, residual, ...)"""
+    """n steps in C++ (the GIL released); returns a dict of arrays (t, q, v, lam, gaps, states, residual, ...)"""
 
 def solver_names() -> list:
     ...

@@ -300,6 +300,34 @@ class Simulator:
             converged=rec["converged"].astype(bool), dt=rec["dt"], timings=rec["timings"],
             rows=rec["rows"].astype(np.int8).reshape(n, nc))
 
+    def batch_rollout(self, states=None, duration: float | None = None, record_every: int = 1,
+                      threads: int | None = None) -> "Batch":
+        """Simulate several initial states of this scene at once on a pool of C++ threads (see
+        :func:`batch_rollout`). `states`: a list of (q, v) pairs (either may be None: the scene's),
+        or an int n for n copies of the current state. The simulator's own state is unchanged."""
+        if states is None:
+            states = 1
+        if isinstance(states, (int, np.integer)) and not isinstance(states, bool):
+            if states < 1:
+                raise ValueError(f"batch_rollout: states must be >= 1 copies, got {states}")
+            states = [(None, None)] * int(states)
+        sims = []
+        for k, pair in enumerate(states):
+            try:
+                q, v = pair
+            except (TypeError, ValueError):
+                raise TypeError(f"batch_rollout: states[{k}] must be a (q, v) pair") from None
+            clone = Simulator.__new__(Simulator)
+            clone.scene, clone.duration, clone.model = self.scene, self.duration, self.model
+            clone.data = _core.SimulatorData(self.model)
+            clone.data.q, clone.data.v, clone.data.t = self.data.q, self.data.v, self.data.t
+            clone.data.kp, clone.data.kd = self.data.kp, self.data.kd
+            clone.data.q_target, clone.data.v_target, clone.data.tau_ff = (self.data.q_target, self.data.v_target,
+                                                                           self.data.tau_ff)
+            clone.set_state(q, v)
+            sims.append(clone)
+        return batch_rollout(sims, duration, record_every, threads)
+
     # ---- post-processing
     def contact_centers(self, traj: Trajectory) -> np.ndarray:
         """World position of every candidate sphere centre (points: the point), (N, nc, 3)."""
@@ -442,3 +470,69 @@ def sliding_acceleration(scene: Scene) -> float:
     frictionless = bool(items) and all(c.mu == 0.0 or c.model == _core.ContactModel.frictionless for c in items)
     a = 9.81 * (math.sin(th) - (0.0 if frictionless else scene.mu) * math.cos(th))
     return a if a > 0 else 0.0
+
+
+@dataclass
+class Batch:
+    """Independent rollouts run together (:func:`batch_rollout`): one Trajectory per simulation
+    and, for a simulation that stopped early (diverged, no contact solution), its error message
+    (its trajectory then ends at the last state reached)."""
+
+    trajectories: list[Trajectory]
+    errors: list[str | None]
+    seconds: float  # wall time of the whole batch
+
+    def stacked(self, key: str) -> np.ndarray:
+        """One field of every trajectory stacked along a new first axis, e.g. stacked("q") has shape
+        (simulations, records, nq). ValueError when the shapes differ (different scenes, or a
+        simulation that stopped early)."""
+        arrays = [getattr(t, key) for t in self.trajectories]
+        shapes = {a.shape for a in arrays}
+        if len(shapes) > 1:
+            raise ValueError(f"Batch.stacked({key!r}): the trajectories differ in shape {sorted(shapes)}")
+        return np.stack(arrays)
+
+
+def batch_rollout(simulators: list[Simulator], duration: float | None = None, record_every: int = 1,
+                  threads: int | None = None) -> Batch:
+    """Roll out several simulators at once on a pool of C++ threads (threads: None = one per
+    core), the GIL released. Each simulator advances from its own state by round(duration / dt)
+    steps (duration: None = the first simulator's). The simulators may differ (scenes, settings,
+    formulations) but must be distinct objects; time stepping and rk4 modes (adaptive steps
+    differ per simulation: roll those out one by one)."""
+    import time as _time
+
+    sims = list(simulators)
+    if not sims:
+        raise ValueError("batch_rollout: no simulators given")
+    for k, s in enumerate(sims):
+        if not isinstance(s, Simulator):
+            raise TypeError(f"batch_rollout: simulators[{k}] is a {type(s).__name__}, not a Simulator")
+        if s.model.settings.mode == _core.IntegrationMode.adaptive:
+            raise ValueError(f"batch_rollout: simulators[{k}] uses adaptive steps; roll it out alone")
+    if len({id(s.data) for s in sims}) != len(sims):
+        raise ValueError("batch_rollout: a simulator appears twice (each simulation needs its own)")
+    duration = sims[0].duration if duration is None else _positive("duration", duration)
+    dts = {s.model.settings.dt for s in sims}
+    if len(dts) > 1:
+        raise ValueError(f"batch_rollout: the simulators have different time steps {sorted(dts)}")
+    n = int(round(duration / dts.pop()))
+    if n < 1:
+        raise ValueError(f"batch_rollout: duration {duration:g} s is shorter than one step")
+    if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
+        raise ValueError(f"record_every must be an integer >= 1, got {record_every!r}")
+    if threads is None:
+        threads = 0
+    elif isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise ValueError(f"batch_rollout: threads must be an integer >= 1 (or None: one per core), got {threads!r}")
+    t0 = _time.perf_counter()
+    recs = _core.batch_rollout([s.model for s in sims], [s.data for s in sims], n, int(record_every), int(threads))
+    seconds = _time.perf_counter() - t0
+    trajs, errors = [], []
+    for s, rec in zip(sims, recs):
+        errors.append(rec.pop("error"))
+        m = len(rec["t"])
+        rec = {k: (np.asarray(v).reshape(m) if k in _VECTOR_KEYS else np.asarray(v).reshape(m, -1))
+               for k, v in rec.items()}
+        trajs.append(s._trajectory(rec))
+    return Batch(trajs, errors, seconds)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import threading
 from typing import Sequence
 
 import numpy as np
@@ -10,8 +11,16 @@ import numpy as np
 from ._core import (Constraint, ContactProblem, Formulation, Solver, SolverResult, SolverSettings, WarmStart,
                     solver_names)
 
-_solvers: dict[str, Solver] = {}
-_formulations: dict[tuple, Formulation] = {}
+class _PerThread(threading.local):
+    """Solver and Formulation objects hold workspaces and run with the GIL released: each thread
+    keeps its own, so stiction.solve may be called from several threads at once."""
+
+    def __init__(self):
+        self.solvers: dict[str, Solver] = {}
+        self.formulations: dict[tuple, Formulation] = {}
+
+
+_cache = _PerThread()
 
 
 def _type_name(x) -> str:
@@ -97,7 +106,8 @@ def solve(
     warm_start: None (lambda = 0), "proxqp" (facetized-cone QP by ProxQP), or an
     array lambda_0 (e.g. the previous step's solution).
     time_limit: seconds for the whole solve, every stage included (0: none).
-    The solver objects (and their workspaces) are reused across calls.
+    The solver objects (and their workspaces) are reused across calls, one set per thread; the
+    solve runs with the GIL released, so threads solve in parallel.
     Wrong kinds of argument raise TypeError, wrong values ValueError, naming the argument.
 
     formulation: "exact" (default; `solver` picks the algorithm) or ccp, nakaoka, pyramid, penalty,
@@ -112,7 +122,7 @@ def solve(
         raise TypeError(f"solve: problem must be a stiction.ContactProblem, got {_type_name(problem)}")
     if not isinstance(solver, str):
         raise TypeError(f"solve: solver must be a name (str), got {_type_name(solver)}")
-    if solver not in _solvers and solver not in solver_names():
+    if solver not in _cache.solvers and solver not in solver_names():
         raise ValueError(f"unknown solver '{solver}' (known: {', '.join(solver_names())})")
     tol = _real(tol, "solve: tol")
     if not (tol > 0 and math.isfinite(tol)):
@@ -140,9 +150,10 @@ def solve(
     if formulation != "exact" or formulation_parameters or h is not None or position_error is not None:
         return _solve_formulation(problem, solver, settings, guess, formulation, h, position_error,
                                   formulation_parameters)
-    if solver not in _solvers:
-        _solvers[solver] = Solver(solver)
-    return _solvers[solver].solve(problem, settings, guess)
+    solvers = _cache.solvers
+    if solver not in solvers:
+        solvers[solver] = Solver(solver)
+    return solvers[solver].solve(problem, settings, guess)
 
 
 _settings_cache: dict[tuple, SolverSettings] = {}
@@ -189,9 +200,10 @@ def _solve_formulation(problem, solver, settings, guess, formulation, h, positio
             raise ValueError(f"solve: position_error has {position_error.shape[0]} entries, the problem has "
                              f"{problem.num_rows} rows")
     key = (formulation, solver, tuple(sorted((k, v) for k, v in params.items() if v is not None)))
-    f = _formulations.get(key)
+    cache = _cache.formulations
+    f = cache.get(key)
     if f is None:
-        if len(_formulations) > 64:
-            _formulations.clear()
-        f = _formulations[key] = Formulation(formulation, fs)
+        if len(cache) > 64:
+            cache.clear()
+        f = cache[key] = Formulation(formulation, fs)
     return f.solve(problem, settings, guess, h, position_error)

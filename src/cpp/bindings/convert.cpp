@@ -1,5 +1,9 @@
 #include "convert.hpp"
 
+#include <mutex>
+#include <stdexcept>
+#include <unordered_set>
+
 #include <cmath>
 #include <stdexcept>
 
@@ -156,6 +160,24 @@ Eigen::Vector3d fromPython<Eigen::Vector3d>(const bp::object& x, const std::stri
   const Eigen::VectorXd v = toVector(x, name, 3);
   if (!v.allFinite()) throw std::invalid_argument(name + " has NaN or infinite entries");
   return v;
+}
+
+namespace {
+std::mutex in_use_mutex;
+std::unordered_set<const void*> in_use;
+}  // namespace
+
+InUse::InUse(const void* object, const char* what) : object_(object) {
+  std::lock_guard<std::mutex> lock(in_use_mutex);
+  if (!in_use.insert(object).second)
+    throw std::runtime_error(std::string(what) +
+                             " is in use by another thread (each thread needs its own: a Simulator, or a "
+                             "Solver / Formulation object)");
+}
+
+InUse::~InUse() {
+  std::lock_guard<std::mutex> lock(in_use_mutex);
+  in_use.erase(object_);
 }
 
 }  // namespace python

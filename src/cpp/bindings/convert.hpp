@@ -101,6 +101,33 @@ void checkedMember(Class& cls, const char* name, T C::*member, const char* doc =
                    doc);
 }
 
+/// Releases the GIL for its lifetime (long C++ work: rollouts, solves), so Python threads run
+/// meanwhile. Nothing inside may touch a Python object.
+class ReleaseGil {
+ public:
+  ReleaseGil() : state_(PyEval_SaveThread()) {}
+  ~ReleaseGil() { PyEval_RestoreThread(state_); }
+  ReleaseGil(const ReleaseGil&) = delete;
+  ReleaseGil& operator=(const ReleaseGil&) = delete;
+
+ private:
+  PyThreadState* state_;
+};
+
+/// Marks a C++ object (a SimulatorData, a solver's workspace) as used by one call while the GIL
+/// is released: a second thread reaching it meanwhile gets a RuntimeError naming it instead of a
+/// data race. Taken with the GIL held.
+class InUse {
+ public:
+  InUse(const void* object, const char* what);
+  ~InUse();
+  InUse(const InUse&) = delete;
+  InUse& operator=(const InUse&) = delete;
+
+ private:
+  const void* object_;
+};
+
 }  // namespace python
 }  // namespace stiction
 

@@ -8,6 +8,7 @@
 #include "convert.hpp"
 #include "expose.hpp"
 #include "stiction/rk4_stability.hpp"
+#include "stiction/rollout.hpp"
 #include "stiction/simulator.hpp"
 
 namespace bp = boost::python;
@@ -148,64 +149,74 @@ void doBuild(const bp::object& sim_, const bp::object& data, const bp::object& q
   buildContactProblem(sim, d, q, v, delta, zeta);
 }
 
-bp::dict rolloutImpl(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every);
-
-bp::dict rollout(const bp::object& sim, const bp::object& data, const bp::object& n_steps,
-                 const bp::object& every) {
-  return rolloutImpl(simArg(sim, "rollout"), dataArg(data, "rollout"), fromPython<int>(n_steps, "rollout: n_steps"),
-                     fromPython<int>(every, "rollout: record_every"));
+bp::dict recordingDict(const Recording& rec) {
+  const int n = rec.records;  // the rows filled
+  bp::dict out;
+  out["t"] = Eigen::VectorXd(rec.t.head(n));
+  out["q"] = Eigen::MatrixXd(rec.q.topRows(n));
+  out["v"] = Eigen::MatrixXd(rec.v.topRows(n));
+  out["lam"] = Eigen::MatrixXd(rec.lam.topRows(n));
+  out["contact_velocity"] = Eigen::MatrixXd(rec.contact_velocity.topRows(n));
+  out["gaps"] = Eigen::MatrixXd(rec.gaps.topRows(n));
+  out["states"] = Eigen::MatrixXd(rec.states.topRows(n));
+  out["rows"] = Eigen::MatrixXd(rec.rows.topRows(n));
+  out["anchor_lam"] = Eigen::MatrixXd(rec.anchor_lam.topRows(n));
+  out["residual"] = Eigen::VectorXd(rec.residual.head(n));
+  out["iterations"] = Eigen::VectorXd(rec.iterations.head(n));
+  out["converged"] = Eigen::VectorXd(rec.converged.head(n));
+  out["dt"] = Eigen::VectorXd(rec.dt.head(n));
+  out["timings"] = Eigen::MatrixXd(rec.timings.topRows(n));
+  return out;
 }
 
-/// Run n steps in C++, recording every `every`-th state (and the first).
-bp::dict rolloutImpl(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every) {
-  if (n_steps < 0) throw std::invalid_argument("rollout: n_steps must be >= 0");
-  if (every < 1) throw std::invalid_argument("rollout: record_every must be >= 1");
-  const int records = n_steps / every + 1;
-  const int nc = sim.numCandidates();
-  const int na = static_cast<int>(sim.anchors.size());
-  Eigen::VectorXd t(records), residual(records), iterations(records), converged(records), dts(records);
-  Eigen::MatrixXd q(records, sim.model.nq), v(records, sim.model.nv), lam(records, 3 * nc), gaps(records, nc),
-      states(records, nc), rows(records, nc), anchors(records, 3 * na), timings(records, 5), vel(records, 3 * nc);
-  auto record = [&](int r) {
-    t[r] = d.t;
-    q.row(r) = d.q.transpose();
-    v.row(r) = d.v.transpose();
-    for (int i = 0; i < nc; ++i) {
-      lam.block<1, 3>(r, 3 * i) = d.candidate_lambda.col(i).transpose();
-      vel.block<1, 3>(r, 3 * i) = d.candidate_velocity.col(i).transpose();
-      states(r, i) = static_cast<int>(d.candidate_states[i]);
-      rows(r, i) = d.candidate_rows[i];
-    }
-    gaps.row(r) = d.gaps.transpose();
-    for (int a = 0; a < na; ++a) anchors.block<1, 3>(r, 3 * a) = d.anchor_lambda.col(a).transpose();
-    residual[r] = d.max_residual_step;
-    iterations[r] = d.iterations_step;
-    converged[r] = d.all_converged_step ? 1.0 : 0.0;
-    dts[r] = d.last_dt;
-    timings.row(r) << d.timings.kinematics, d.timings.delassus, d.timings.solve, d.timings.integrate,
-        d.timings.total;
-  };
-  record(0);
-  int r = 1;
-  for (int k = 1; k <= n_steps; ++k) {
-    step(sim, d);
-    if (k % every == 0) record(r++);
+/// Run n steps in C++ (the GIL released), recording every `every`-th state (and the first).
+bp::dict rollout(const bp::object& sim_, const bp::object& data_, const bp::object& n_steps_,
+                 const bp::object& every_) {
+  const SimulatorModel& sim = simArg(sim_, "rollout");
+  SimulatorData& d = dataArg(data_, "rollout");
+  const int n_steps = fromPython<int>(n_steps_, "rollout: n_steps");
+  const int every = fromPython<int>(every_, "rollout: record_every");
+  Recording rec;
+  {
+    InUse busy(&d, "this SimulatorData");
+    ReleaseGil nogil;
+    stiction::rollout(sim, d, n_steps, every, rec);  // a failing step throws after the GIL is back
   }
-  bp::dict out;
-  out["t"] = t;
-  out["q"] = q;
-  out["v"] = v;
-  out["lam"] = lam;
-  out["contact_velocity"] = vel;
-  out["gaps"] = gaps;
-  out["states"] = states;
-  out["rows"] = rows;
-  out["anchor_lam"] = anchors;
-  out["residual"] = residual;
-  out["iterations"] = iterations;
-  out["converged"] = converged;
-  out["dt"] = dts;
-  out["timings"] = timings;
+  return recordingDict(rec);
+}
+
+/// Independent rollouts on a pool of C++ threads; a list of dicts (each with "error": None or
+/// why that simulation stopped, its unrecorded rows dropped).
+bp::list batchRollout(const bp::object& sims_, const bp::object& datas_, const bp::object& n_steps_,
+                      const bp::object& every_, const bp::object& threads_) {
+  const bp::list sims(sims_), datas(datas_);
+  const long n = bp::len(sims);
+  if (bp::len(datas) != n)
+    throw std::invalid_argument("batch_rollout: " + std::to_string(n) + " models but " +
+                                std::to_string(bp::len(datas)) + " data objects");
+  const int n_steps = fromPython<int>(n_steps_, "batch_rollout: n_steps");
+  const int every = fromPython<int>(every_, "batch_rollout: record_every");
+  const int threads = fromPython<int>(threads_, "batch_rollout: threads");
+  std::vector<BatchItem> items(n);
+  std::vector<std::unique_ptr<InUse>> busy;
+  for (long i = 0; i < n; ++i) {
+    items[i].sim = &simArg(sims[i], "batch_rollout");
+    items[i].data = &dataArg(datas[i], "batch_rollout");
+    if (items[i].data->q.size() != items[i].sim->model.nq)
+      throw std::invalid_argument("batch_rollout: item " + std::to_string(i) + ": its data was not made for its model");
+  }
+  std::vector<Recording> recs;
+  {
+    for (long i = 0; i < n; ++i) busy.push_back(std::make_unique<InUse>(items[i].data, "a SimulatorData of the batch"));
+    ReleaseGil nogil;
+    batchRollout(items, n_steps, every, threads, recs);
+  }
+  bp::list out;
+  for (const Recording& rec : recs) {
+    bp::dict d = recordingDict(rec);
+    d["error"] = rec.error.empty() ? bp::object() : bp::object(rec.error);
+    out.append(d);
+  }
   return out;
 }
 
@@ -375,7 +386,12 @@ void exposeSimulator() {
           (bp::arg("sim"), bp::arg("data"), bp::arg("q"), bp::arg("v"), bp::arg("delta"), bp::arg("zeta")),
           "fill data.J, A, b (eq. 27), drift, position_error and active at (q, v)");
   bp::def("rollout", &rollout, (bp::arg("sim"), bp::arg("data"), bp::arg("n_steps"), bp::arg("record_every") = 1),
-          "n steps in C++; returns a dict of arrays (t, q, v, lam, gaps, states, residual, ...)");
+          "n steps in C++ (the GIL released); returns a dict of arrays (t, q, v, lam, gaps, states, residual, ...)");
+  bp::def("batch_rollout", &batchRollout,
+          (bp::arg("sims"), bp::arg("datas"), bp::arg("n_steps"), bp::arg("record_every") = 1,
+           bp::arg("threads") = 0),
+          "independent rollouts of (sims[i], datas[i]) on a pool of C++ threads (0: one per core), the GIL "
+          "released; a list of dicts as rollout's, each with 'error' (None, or why it stopped)");
 }
 
 }  // namespace python

@@ -50,12 +50,11 @@ struct FormulationSolver {
     }
     setFormulationContext(*impl, context);
     SolverResult result;
-    if (guess.is_none()) {
-      stiction::solve(p, *impl, s, result, nullptr);
-    } else {
-      const Eigen::VectorXd v = toVector(guess, "Formulation.solve: guess (initial lambda)");
-      stiction::solve(p, *impl, s, result, &v);
-    }
+    Eigen::VectorXd v;
+    if (!guess.is_none()) v = toVector(guess, "Formulation.solve: guess (initial lambda)");
+    InUse busy(impl.get(), "this Formulation object");
+    ReleaseGil nogil;
+    stiction::solve(p, *impl, s, result, guess.is_none() ? nullptr : &v);
     return result;
   }
   std::string name() const { return formulation; }
@@ -91,12 +90,11 @@ struct Solver {
     const ContactProblem& p = toObject<ContactProblem>(problem, "Solver.solve: problem", "stiction.ContactProblem");
     const SolverSettings& s = toObject<SolverSettings>(settings, "Solver.solve: settings", "stiction.SolverSettings");
     SolverResult result;
-    if (guess.is_none()) {
-      stiction::solve(p, *impl, s, result, nullptr);
-    } else {
-      const Eigen::VectorXd v = toVector(guess, "Solver.solve: guess (initial lambda)");
-      stiction::solve(p, *impl, s, result, &v);
-    }
+    Eigen::VectorXd v;
+    if (!guess.is_none()) v = toVector(guess, "Solver.solve: guess (initial lambda)");
+    InUse busy(impl.get(), "this Solver object");
+    ReleaseGil nogil;
+    stiction::solve(p, *impl, s, result, guess.is_none() ? nullptr : &v);
     return result;
   }
   std::string name() const { return impl->name(); }
