@@ -41,7 +41,7 @@ class ContactModel(int):
     values: ClassVar[dict[int, ContactModel]]
 
 class ContactProblem:
-    """A lambda - b in -lim N_C^{U_eps}(lambda) (eq. 65): Delassus operator A, right-hand side b, and the list of constraint blocks. Raises ValueError on inconsistent input (sizes, NaN, mu < 0, an asymmetric or indefinite A) and TypeError on the wrong kind of argument."""
+    """A lambda - b in -lim N_C^{U_eps}(lambda) (eq. 65): Delassus operator A, right-hand side b, and the list of constraint blocks. Raises ValueError on inconsistent input (sizes, NaN, mu < 0, an asymmetric or indefinite A) and TypeError on the wrong kind of argument. A may be a dense array or a scipy.sparse matrix (then held sparse: products and the NSGS / ADMM solvers cost O(entries))."""
     @property
     def A(self) -> numpy.ndarray: ...
 
@@ -54,6 +54,12 @@ class ContactProblem:
 
     @property
     def constraints(self) -> list: ...
+
+    @property
+    def is_sparse(self) -> bool: ...
+
+    @property
+    def nnz(self) -> int: ...
 
     @property
     def num_blocks(self) -> int: ...

@@ -12,16 +12,47 @@ namespace python {
 
 namespace {
 
+/// A scipy.sparse matrix as an Eigen compressed-column matrix (its CSC arrays copied).
+Eigen::SparseMatrix<double> toSparse(const bp::object& A) {
+  const bp::object csc = A.attr("tocsc")();
+  const bp::tuple shape = bp::extract<bp::tuple>(bp::object(csc.attr("shape")));
+  const long rows = bp::extract<long>(shape[0]), cols = bp::extract<long>(shape[1]);
+  if (rows != cols)
+    throw std::invalid_argument("ContactProblem: A must be square, got " + std::to_string(rows) + "x" +
+                                std::to_string(cols));
+  const bp::object np = bp::import("numpy");
+  const Eigen::VectorXd data = toVector(np.attr("asarray")(bp::object(csc.attr("data")), "float64"), "ContactProblem: A.data");
+  const Eigen::VectorXd indices = toVector(np.attr("asarray")(bp::object(csc.attr("indices")), "float64"), "ContactProblem: A.indices");
+  const Eigen::VectorXd indptr = toVector(np.attr("asarray")(bp::object(csc.attr("indptr")), "float64"), "ContactProblem: A.indptr");
+  if (indptr.size() != cols + 1 || indices.size() != data.size())
+    throw std::invalid_argument("ContactProblem: A is a malformed sparse matrix");
+  std::vector<Eigen::Triplet<double>> entries;
+  entries.reserve(static_cast<std::size_t>(data.size()));
+  for (long j = 0; j < cols; ++j)
+    for (long k = static_cast<long>(indptr[j]); k < static_cast<long>(indptr[j + 1]); ++k) {
+      const long i = static_cast<long>(indices[k]);
+      if (i < 0 || i >= rows) throw std::invalid_argument("ContactProblem: A has a row index out of range");
+      entries.emplace_back(static_cast<int>(i), static_cast<int>(j), data[k]);
+    }
+  Eigen::SparseMatrix<double> out(rows, cols);
+  out.setFromTriplets(entries.begin(), entries.end());  // duplicates summed, as scipy does
+  return out;
+}
+
 std::shared_ptr<ContactProblem> makeProblem(const bp::object& A, const bp::object& b, const bp::object& constraints,
                                             const bp::object& asymmetry_tolerance) {
   if (constraints.is_none()) raiseTypeError("ContactProblem: constraints is required (a list of stiction.Constraint)");
-  Eigen::MatrixXd a = toMatrix(A, "ContactProblem: A");
+  std::shared_ptr<DelassusOperator> op;
+  if (PyObject_HasAttrString(A.ptr(), "tocsc") && PyObject_HasAttrString(A.ptr(), "nnz")) {
+    op = std::make_shared<SparseDelassus>(toSparse(A));  // a scipy.sparse matrix: kept sparse
+  } else {
+    op = std::make_shared<DenseDelassus>(toMatrix(A, "ContactProblem: A"));
+  }
   Eigen::VectorXd bv = toVector(b, "ContactProblem: b");
   std::vector<Constraint> cons = toList<Constraint>(constraints, "ContactProblem: constraints", "stiction.Constraint");
   const double tol = toDouble(asymmetry_tolerance, "ContactProblem: asymmetry_tolerance");
   if (!(tol >= 0.0)) throw std::invalid_argument("ContactProblem: asymmetry_tolerance must be >= 0");
-  return std::make_shared<ContactProblem>(std::make_shared<DenseDelassus>(std::move(a)), std::move(bv),
-                                          std::move(cons), tol);
+  return std::make_shared<ContactProblem>(std::move(op), std::move(bv), std::move(cons), tol);
 }
 
 Constraint bilateral(const bp::object& rows) {
@@ -92,13 +123,21 @@ void exposeProblem() {
       "ContactProblem",
       "A lambda - b in -lim N_C^{U_eps}(lambda) (eq. 65): Delassus operator A, right-hand "
       "side b, and the list of constraint blocks. Raises ValueError on inconsistent input "
-      "(sizes, NaN, mu < 0, an asymmetric or indefinite A) and TypeError on the wrong kind of argument.",
+      "(sizes, NaN, mu < 0, an asymmetric or indefinite A) and TypeError on the wrong kind of argument. "
+      "A may be a dense array or a scipy.sparse matrix (then held sparse: products and the NSGS / ADMM "
+      "solvers cost O(entries)).",
       bp::no_init)
       .def("__init__",
            bp::make_constructor(&makeProblem, bp::default_call_policies(),
                                 (bp::arg("A") = bp::object(), bp::arg("b") = bp::object(),
                                  bp::arg("constraints") = bp::object(), bp::arg("asymmetry_tolerance") = 1e-9)))
       .add_property("A", &denseA, "dense copy of the Delassus operator")
+      .add_property("is_sparse", +[](const ContactProblem& p) { return p.delassus().sparse() != nullptr; },
+                    "A is held sparse (built from a scipy.sparse matrix)")
+      .add_property("nnz", +[](const ContactProblem& p) -> long {
+                      const auto* s = p.delassus().sparse();
+                      return s ? static_cast<long>(s->nonZeros()) : static_cast<long>(p.numRows() * p.numRows());
+                    }, "stored entries of A")
       .add_property("b", &bOf)
       .add_property("constraints", &constraintsOf)
       .add_property("offsets", &offsetsOf, "first row of each block, then the row count")

@@ -12,12 +12,12 @@ double largestEigenvalue(const ContactProblem& problem, int iterations) {
   const Eigen::Index m = problem.numRows();
   if (m == 0) return 0.0;
   Eigen::VectorXd x = Eigen::VectorXd::Ones(m) / std::sqrt(double(m)), y(m), yt(m);
-  const Eigen::MatrixXd& A = problem.delassus().dense();
+  const DelassusOperator& A = problem.delassus();
   double L = 0.0;
   for (int i = 0; i < iterations; ++i) {
-    y.noalias() = A * x;
+    A.multiply(x, y);
     if (!problem.isSymmetric()) {
-      yt.noalias() = A.transpose() * x;
+      A.multiplyTransposed(x, yt);
       y = 0.5 * (y + yt);
     }
     L = x.dot(y);
@@ -67,6 +67,19 @@ void addDesaxce(const ContactProblem& problem, const Eigen::VectorXd& u, double 
 }  // namespace
 
 void AdmmSolver::factorize(const ContactProblem& problem, double shift) {
+  if (const Eigen::SparseMatrix<double>* S = problem.delassus().sparse()) {
+    // Sparse A: a sparse Cholesky (fill-reducing ordering) of the symmetric part + shift.
+    sparse_ = true;
+    Eigen::SparseMatrix<double> H = 0.5 * (*S + Eigen::SparseMatrix<double>(S->transpose()));
+    Eigen::SparseMatrix<double> I(H.rows(), H.cols());
+    I.setIdentity();
+    H += shift * I;
+    sparse_llt_.compute(H);
+    if (sparse_llt_.info() == Eigen::Success) return;
+    sparse_ = false;  // not quite SPD: the dense LU below
+  } else {
+    sparse_ = false;
+  }
   const Eigen::MatrixXd& A = problem.delassus().dense();
   shifted_ = A;
   shifted_.diagonal().array() += shift;
@@ -82,7 +95,9 @@ void AdmmSolver::factorize(const ContactProblem& problem, double shift) {
 }
 
 void AdmmSolver::solveShifted(Eigen::VectorXd& x) const {
-  if (symmetric_)
+  if (sparse_)
+    x = sparse_llt_.solve(x);
+  else if (symmetric_)
     llt_.solveInPlace(x);
   else
     x = lu_.solve(x);

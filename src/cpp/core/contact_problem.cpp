@@ -1,5 +1,7 @@
 #include "stiction/contact_problem.hpp"
 
+#include <Eigen/SparseCholesky>
+
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -49,13 +51,13 @@ ContactProblem::ContactProblem(std::shared_ptr<const DelassusOperator> delassus,
   if (row != m)
     throw std::invalid_argument("ContactProblem: the constraints have " + std::to_string(row) +
                                 " rows in all but A is " + std::to_string(m) + "x" + std::to_string(m));
-  const Eigen::MatrixXd& A = delassus_->dense();
-  if (!A.allFinite()) throw std::invalid_argument("ContactProblem: A has NaN or infinite entries");
+  if (!delassus_->allFinite()) throw std::invalid_argument("ContactProblem: A has NaN or infinite entries");
   if (!b_.allFinite()) throw std::invalid_argument("ContactProblem: b has NaN or infinite entries");
+  const Eigen::VectorXd diag = delassus_->diagonal();
   for (Eigen::Index i = 0; i < m; ++i)
-    if (!(A(i, i) >= 0.0))
+    if (!(diag[i] >= 0.0))
       throw std::invalid_argument("ContactProblem: A[" + std::to_string(i) + "," + std::to_string(i) +
-                                  "] = " + fmt(A(i, i)) +
+                                  "] = " + fmt(diag[i]) +
                                   " is negative; a Delassus operator is positive semi-definite");
   asymmetry_ = delassus_->relativeAsymmetry();
   if (asymmetry_ > asymmetry_tolerance)
@@ -64,10 +66,26 @@ ContactProblem::ContactProblem(std::shared_ptr<const DelassusOperator> delassus,
                                 ")");
   // (A zero diagonal leaves nothing to scale by: then A must be 0, as for a problem
   // whose contacts all sit on things that cannot move.)
-  if (check_definiteness && m > 0 && A.diagonal().maxCoeff() == 0.0 && A.cwiseAbs().maxCoeff() > 0.0)
+  const Eigen::SparseMatrix<double>* sparse = delassus_->sparse();
+  if (check_definiteness && m > 0 && diag.maxCoeff() == 0.0 &&
+      (sparse ? sparse->coeffs().cwiseAbs().maxCoeff() : delassus_->dense().cwiseAbs().maxCoeff()) > 0.0)
     throw std::invalid_argument("ContactProblem: A is not positive semi-definite (zero diagonal, non-zero "
                                 "off-diagonal entries); a Delassus operator J M^-1 J^T never is");
-  if (check_definiteness && m > 0 && A.diagonal().maxCoeff() > 0.0) {
+  if (check_definiteness && m > 0 && diag.maxCoeff() > 0.0 && sparse != nullptr) {
+    // The same test, factorized sparsely (a dense copy of a large sparse A is what it avoids).
+    const double max_diag = diag.maxCoeff();
+    Eigen::SparseMatrix<double> H = 0.5 * (*sparse + Eigen::SparseMatrix<double>(sparse->transpose()));
+    Eigen::SparseMatrix<double> shift(m, m);
+    shift.setIdentity();
+    H += (kIndefiniteTolerance * max_diag) * shift;
+    Eigen::SimplicialLLT<Eigen::SparseMatrix<double>> llt(H);
+    if (llt.info() != Eigen::Success)
+      throw std::invalid_argument("ContactProblem: A is not positive semi-definite (the sparse Cholesky "
+                                  "factorization of A + " + fmt(kIndefiniteTolerance) +
+                                  " max(diag A) I fails); a Delassus operator J M^-1 J^T never is: check how A "
+                                  "was assembled");
+  } else if (check_definiteness && m > 0 && diag.maxCoeff() > 0.0) {
+    const Eigen::MatrixXd& A = delassus_->dense();
     const double max_diag = A.diagonal().maxCoeff();
     Eigen::MatrixXd H = 0.5 * (A + A.transpose());
     H.diagonal().array() += kIndefiniteTolerance * max_diag;

@@ -39,4 +39,85 @@ double DenseDelassus::relativeAsymmetry() const {
   return (A_ - A_.transpose()).cwiseAbs().maxCoeff() / scale;
 }
 
+void DenseDelassus::multiplyTransposed(const Eigen::Ref<const Eigen::VectorXd>& x,
+                                       Eigen::Ref<Eigen::VectorXd> y) const {
+  y.noalias() = A_.transpose() * x;
+}
+
+void DenseDelassus::multiplyExtended(const Eigen::Matrix<long double, Eigen::Dynamic, 1>& x,
+                                     Eigen::Matrix<long double, Eigen::Dynamic, 1>& y) const {
+  y.setZero(A_.rows());
+  for (Eigen::Index j = 0; j < A_.cols(); ++j) y += A_.col(j).cast<long double>() * x[j];
+}
+
+SparseDelassus::SparseDelassus(Matrix A) : A_(std::move(A)) {
+  if (A_.rows() != A_.cols())
+    throw std::invalid_argument("Delassus matrix A must be square, got " + std::to_string(A_.rows()) + "x" +
+                                std::to_string(A_.cols()));
+  A_.makeCompressed();
+  abs_ = A_.cwiseAbs();
+}
+
+void SparseDelassus::multiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const {
+  y.noalias() = A_ * x;
+}
+
+void SparseDelassus::absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const {
+  y.noalias() = abs_ * x.cwiseAbs();
+}
+
+void SparseDelassus::addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,
+                                         const Eigen::Ref<const Eigen::VectorXd>& dx,
+                                         Eigen::Ref<Eigen::VectorXd> y) const {
+  for (Eigen::Index k = 0; k < size; ++k) {
+    const double d = dx[k];
+    if (d == 0.0) continue;
+    for (Matrix::InnerIterator it(A_, offset + k); it; ++it) y[it.row()] += it.value() * d;
+  }
+}
+
+Eigen::MatrixXd SparseDelassus::diagonalBlock(Eigen::Index offset, Eigen::Index size) const {
+  Eigen::MatrixXd B = Eigen::MatrixXd::Zero(size, size);
+  for (Eigen::Index k = 0; k < size; ++k)
+    for (Matrix::InnerIterator it(A_, offset + k); it; ++it)
+      if (it.row() >= offset && it.row() < offset + size) B(it.row() - offset, k) = it.value();
+  return B;
+}
+
+const Eigen::MatrixXd& SparseDelassus::dense() const {
+  std::call_once(dense_once_, [this] { dense_ = Eigen::MatrixXd(A_); });
+  return dense_;
+}
+
+double SparseDelassus::relativeAsymmetry() const {
+  if (A_.nonZeros() == 0) return 0.0;
+  const double scale = abs_.coeffs().maxCoeff();
+  if (!(scale > 0.0)) return 0.0;
+  const Matrix diff = A_ - Matrix(A_.transpose());
+  return diff.nonZeros() == 0 ? 0.0 : diff.coeffs().cwiseAbs().maxCoeff() / scale;
+}
+
+void SparseDelassus::multiplyTransposed(const Eigen::Ref<const Eigen::VectorXd>& x,
+                                        Eigen::Ref<Eigen::VectorXd> y) const {
+  y.noalias() = A_.transpose() * x;
+}
+
+void SparseDelassus::multiplyExtended(const Eigen::Matrix<long double, Eigen::Dynamic, 1>& x,
+                                      Eigen::Matrix<long double, Eigen::Dynamic, 1>& y) const {
+  y.setZero(A_.rows());
+  for (Eigen::Index j = 0; j < A_.cols(); ++j)
+    for (Matrix::InnerIterator it(A_, j); it; ++it)
+      y[it.row()] += static_cast<long double>(it.value()) * x[j];
+}
+
+double SparseDelassus::rowNorm(Eigen::Index i) const {
+  double sq = 0.0;
+  for (Eigen::Index j = 0; j < A_.outerSize(); ++j)
+    for (Matrix::InnerIterator it(A_, j); it; ++it)
+      if (it.row() == i) sq += it.value() * it.value();
+  return std::sqrt(sq);
+}
+
+bool SparseDelassus::allFinite() const { return A_.coeffs().allFinite(); }
+
 }  // namespace stiction

@@ -34,7 +34,7 @@ void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen:
                     const Eigen::Ref<const Eigen::VectorXd>& u, std::vector<ContactState>& states) {
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
-  const Eigen::MatrixXd& A = problem.delassus().dense();
+  const Eigen::VectorXd diag = problem.delassus().diagonal();
   states.resize(cons.size());
   // Tangential speeds below this are solver noise, not sliding.
   const double speed_floor = 1.5e-8 * std::max(problem.b().lpNorm<Eigen::Infinity>(), 1e-300);
@@ -47,7 +47,7 @@ void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen:
     }
     // Compare what the force does (A_nn lambda_n) with the separation velocity u_n.
     const Eigen::Index n = o + k - 1;
-    const double a_nn = A(n, n);
+    const double a_nn = diag[n];
     const bool pushing = a_nn > 0.0 ? a_nn * lam[n] > u[n] : lam[n] > 0.0;
     if (!pushing || lam[n] <= 0.0) {
       states[i] = ContactState::kOpen;
@@ -62,11 +62,11 @@ void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen:
     if (k == 3) {
       lt = norm2(lam[o], lam[o + 1]);
       ut = norm2(u[o], u[o + 1]);
-      a_tt = 0.5 * (A(o, o) + A(o + 1, o + 1));
+      a_tt = 0.5 * (diag[o] + diag[o + 1]);
     } else {
       lt = std::abs(lam[o]);
       ut = std::abs(u[o]);
-      a_tt = A(o, o);
+      a_tt = diag[o];
     }
     const double margin = std::max(0.0, cons[i].mu * lam[n] - lt);
     states[i] = ut > a_tt * margin && ut > speed_floor ? ContactState::kSlip : ContactState::kStick;

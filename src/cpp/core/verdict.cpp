@@ -1,5 +1,7 @@
 #include "stiction/verdict.hpp"
 
+#include <type_traits>
+
 #include <cmath>
 #include <limits>
 
@@ -162,7 +164,6 @@ void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<cons
   thread_local Eigen::VectorXd abs_product, du, ud;
   thread_local VectorExt l, u;
   thread_local std::vector<double> block_bound, block_floor;
-  const Eigen::MatrixXd& A = problem.delassus().dense();
   const Eigen::Index m = problem.numRows();
   block_bound.resize(problem.numBlocks());
   // |A||lambda| (in double, inflated by its own rounding: it is only a bound)
@@ -186,9 +187,10 @@ void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<cons
   finish(evaluate<double>(problem, lam.data(), ud.data(), du.data(), &block_bound), gamma);
   if (out.natural_map + out.bound <= decisive || out.natural_map - out.bound > decisive) return;
   // 2. In extended precision: u = A lambda - b and every block, with its (smaller) bound.
+  static_assert(std::is_same<Extended, long double>::value, "DelassusOperator::multiplyExtended is long double");
   l = lam.cast<Extended>();
-  u = -problem.b().cast<Extended>();
-  for (Eigen::Index j = 0; j < m; ++j) u += A.col(j).cast<Extended>() * l[j];
+  problem.delassus().multiplyExtended(l, u);
+  u -= problem.b().cast<Extended>();
   gamma = static_cast<double>((static_cast<Extended>(m) + 2) * unitRoundoff<Extended>());
   du = gamma * (abs_product + problem.b().cwiseAbs());
   finish(static_cast<double>(evaluate<Extended>(problem, l.data(), u.data(), du.data(), &block_bound)), gamma);
@@ -238,17 +240,18 @@ double precisionFloor(const ContactProblem& problem, const Eigen::Ref<const Eige
 InfeasibilityCertificate findInfeasibility(const ContactProblem& problem,
                                            const std::vector<Eigen::VectorXd>& candidates) {
   InfeasibilityCertificate best;
-  const Eigen::MatrixXd& A = problem.delassus().dense();
+  const DelassusOperator& A = problem.delassus();
   const Eigen::VectorXd& b = problem.b();
   const Eigen::Index m = problem.numRows();
   if (m == 0) return best;
-  const double max_diag = A.diagonal().cwiseAbs().maxCoeff();
+  const Eigen::VectorXd diag = A.diagonal();
+  const double max_diag = diag.cwiseAbs().maxCoeff();
   // 1. Rows that nothing moves (a contact on an immovable body) but b pushes closed:
   //    u_n = -b_n < 0 whatever lambda. Only nearly-zero diagonals can be that.
   for (std::size_t i = 0; i < problem.numBlocks(); ++i) {
     const Eigen::Index n = normalRow(problem, i);
-    if (n < 0 || !(b[n] > 0.0) || A(n, n) > 1e-8 * max_diag) continue;
-    const double column = std::max(A.col(n).norm(), A.row(n).norm());
+    if (n < 0 || !(b[n] > 0.0) || diag[n] > 1e-8 * max_diag) continue;
+    const double column = std::max(A.columnNorm(n), A.rowNorm(n));
     const double bound = column > 0.0 ? b[n] / column : kInf;
     if (bound > best.min_solution_norm) {
       best.min_solution_norm = bound;
@@ -277,7 +280,7 @@ InfeasibilityCertificate findInfeasibility(const ContactProblem& problem,
     d /= scale;
     const double push = b.dot(d);
     if (!(push > 0.0)) continue;
-    Ad.noalias() = A.transpose() * d;  // d' A lambda = (A^T d)' lambda
+    A.multiplyTransposed(d, Ad);  // d' A lambda = (A^T d)' lambda
     const double resist = Ad.norm();
     const double bound = resist > 0.0 ? push / resist : kInf;
     if (bound > best.min_solution_norm) {

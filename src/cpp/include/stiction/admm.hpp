@@ -10,6 +10,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
+#include <Eigen/SparseCholesky>
 
 #include "stiction/solver.hpp"
 
@@ -43,6 +44,8 @@ class AdmmSolver final : public ContactSolver {
   Eigen::MatrixXd shifted_;
   Eigen::LLT<Eigen::MatrixXd> llt_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
+  bool sparse_ = false;  // factorized sparsely (a sparse A)
+  Eigen::SimplicialLLT<Eigen::SparseMatrix<double>> sparse_llt_;
   Eigen::VectorXd z_, z_prev_, y_, u_, ulam_, rhs_;
 };
 

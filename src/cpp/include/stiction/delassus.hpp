@@ -4,7 +4,10 @@
 // matrix-free operator can replace the dense one without changing them.
 #pragma once
 
+#include <mutex>
+
 #include <Eigen/Core>
+#include <Eigen/SparseCore>
 
 namespace stiction {
 
@@ -34,6 +37,18 @@ class DelassusOperator {
 
   /// max_ij |A_ij - A_ji| / max_ij |A_ij|  (0 for an exactly symmetric A)
   virtual double relativeAsymmetry() const = 0;
+
+  /// y = A^T x
+  virtual void multiplyTransposed(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const = 0;
+  /// y = A x in long double (the verdict's extended-precision stage)
+  virtual void multiplyExtended(const Eigen::Matrix<long double, Eigen::Dynamic, 1>& x,
+                                Eigen::Matrix<long double, Eigen::Dynamic, 1>& y) const = 0;
+  virtual Eigen::VectorXd diagonal() const = 0;
+  virtual double columnNorm(Eigen::Index j) const = 0;
+  virtual double rowNorm(Eigen::Index i) const = 0;
+  virtual bool allFinite() const = 0;
+  /// The stored entries when A is held sparse (nullptr for a dense A).
+  virtual const Eigen::SparseMatrix<double>* sparse() const { return nullptr; }
 };
 
 /// Dense, column-major storage.
@@ -51,6 +66,13 @@ class DenseDelassus final : public DelassusOperator {
   Eigen::MatrixXd diagonalBlock(Eigen::Index offset, Eigen::Index size) const override;
   const Eigen::MatrixXd& dense() const override { return A_; }
   double relativeAsymmetry() const override;
+  void multiplyTransposed(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
+  void multiplyExtended(const Eigen::Matrix<long double, Eigen::Dynamic, 1>& x,
+                        Eigen::Matrix<long double, Eigen::Dynamic, 1>& y) const override;
+  Eigen::VectorXd diagonal() const override { return A_.diagonal(); }
+  double columnNorm(Eigen::Index j) const override { return A_.col(j).norm(); }
+  double rowNorm(Eigen::Index i) const override { return A_.row(i).norm(); }
+  bool allFinite() const override { return A_.allFinite(); }
   /// Mutable access for per-step updates of the same size (the simulator's A).
   /// The caller keeps it symmetric positive semi-definite: problems built on
   /// this operator validated it once.
@@ -58,6 +80,40 @@ class DenseDelassus final : public DelassusOperator {
 
  private:
   Eigen::MatrixXd A_;
+};
+
+/// Sparse (compressed column) storage: the operator of many bodies, where a contact couples
+/// only with the contacts of the bodies it touches (block-sparse A). Every product the solvers
+/// and the verdict need costs O(entries); dense() builds a dense copy once, on first use, for
+/// the algorithms that factorize densely (Newton, ProxQP, some formulations).
+class SparseDelassus final : public DelassusOperator {
+ public:
+  using Matrix = Eigen::SparseMatrix<double>;
+  explicit SparseDelassus(Matrix A);
+
+  Eigen::Index rows() const override { return A_.rows(); }
+  void multiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
+  void absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
+  void addColumnBlockTimes(Eigen::Index offset, Eigen::Index size, const Eigen::Ref<const Eigen::VectorXd>& dx,
+                           Eigen::Ref<Eigen::VectorXd> y) const override;
+  Eigen::MatrixXd diagonalBlock(Eigen::Index offset, Eigen::Index size) const override;
+  const Eigen::MatrixXd& dense() const override;
+  double relativeAsymmetry() const override;
+  void multiplyTransposed(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
+  void multiplyExtended(const Eigen::Matrix<long double, Eigen::Dynamic, 1>& x,
+                        Eigen::Matrix<long double, Eigen::Dynamic, 1>& y) const override;
+  Eigen::VectorXd diagonal() const override { return A_.diagonal(); }
+  double columnNorm(Eigen::Index j) const override { return A_.col(j).norm(); }
+  double rowNorm(Eigen::Index i) const override;
+  bool allFinite() const override;
+  const Matrix* sparse() const override { return &A_; }
+  Eigen::Index nonZeros() const { return A_.nonZeros(); }
+
+ private:
+  Matrix A_;
+  Matrix abs_;  // |A|, for the rounding bound
+  mutable std::once_flag dense_once_;
+  mutable Eigen::MatrixXd dense_;
 };
 
 }  // namespace stiction
