@@ -2,9 +2,9 @@
 
 An installed wheel carries them as package data under ``stiction/data/`` (CMake installs
 ``robots/`` and the demo problems of ``benchmarks/fclib/`` there) and they are found with
-``importlib.resources``. An editable install from a source checkout has no such folder; the
-files are then read from the checkout itself (``robots/``, ``benchmarks/fclib/``), which also
-holds the whole FCLib set.
+``importlib.resources``. Imported from a source checkout (an editable install), the package reads
+the checkout itself (``robots/``, ``benchmarks/fclib/``), which is always current and also holds
+the whole FCLib set.
 """
 from __future__ import annotations
 
@@ -33,12 +33,14 @@ def _source_root() -> Path | None:
 
 
 def _find(installed: str, source: str, what: str) -> Path:
-    data = _package_data()
-    if data is not None and (data / installed).is_dir():
-        return data / installed
+    # Running from a source checkout (an editable install): its own files, always current (the
+    # copy an editable build also installs under stiction/data would miss files added since).
     root = _source_root()
     if root is not None and (root / source).is_dir():
         return root / source
+    data = _package_data()
+    if data is not None and (data / installed).is_dir():
+        return data / installed
     raise FileNotFoundError(f"the bundled {what} are missing: neither stiction/data/{installed} (an installed "
                             f"wheel) nor {source}/ of a source checkout was found; reinstall stiction")
 

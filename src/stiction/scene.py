@@ -266,7 +266,12 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
         for key in ("feet", "radius"):
             if contacts_cfg[key] is not None:
                 raise SceneError(f"contacts.{key}: `bodies` scenes use their box corners")
-        model, visual, q0, contacts, halfspaces = _stacked_bodies(cfg["bodies"], mu, halfspaces, base_dir, cmodel)
+        if cfg["array"] is not None and cfg["array"]["layout"] == "grid":
+            a = cfg["array"]
+            model, visual, q0, contacts = _grid_bodies(a["urdf"], a["count"], a["spacing"], mu, base_dir, cmodel)
+        else:
+            paths = cfg["bodies"] if cfg["bodies"] is not None else [cfg["array"]["urdf"]] * cfg["array"]["count"]
+            model, visual, q0, contacts, halfspaces = _stacked_bodies(paths, mu, halfspaces, base_dir, cmodel)
 
     for w, wall in enumerate(cfg["walls"]):
         name = wall["name"] or f"wall{len(halfspaces)}"
@@ -305,7 +310,7 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
 
     free = model.joints[1].shortname() == "JointModelFreeFlyer" if model.njoints > 1 else False
     planar = model.njoints > 1 and model.joints[1].shortname() == "JointModelPlanar"
-    bodies = cfg["bodies"] is not None
+    bodies = cfg["bodies"] is not None or cfg["array"] is not None
     for key in ("base_velocity", "base_xy"):
         if initial[key] is not None and not free:
             raise SceneError(f"initial.{key}: the model has no free-flyer base" +
@@ -507,6 +512,47 @@ def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = 
                  slope_deg=slope_deg, mu=mu, geometry=geometry, pairs=pair_list)
 
 
+def _append_box(model, visual, path: str, k: int, base_dir, label: str):
+    """Box URDF number k appended to (model, visual) as a free body with names suffixed _k; returns
+    the new model, visual, the body's frame and its half extents."""
+    urdf = _resolve(path, base_dir)
+    body = load_urdf(urdf, True, _package_dirs(urdf), name=f"body{k}")
+    half = _box_half_extents(body.visual_model)
+    if half is None:
+        raise SceneError(f"{label} = {path!r}: the bodies must be boxes (a URDF with a box visual)")
+    for f in body.model.frames:  # prefix names so several copies can coexist
+        f.name = f"{f.name}_{k}" if f.name != "universe" else f.name
+    names = list(body.model.names)
+    for j in range(1, len(names)):
+        body.model.names[j] = f"{names[j]}_{k}"
+    for go in body.visual_model.geometryObjects:
+        go.name = f"{go.name}_{k}"
+    model, visual = pin.appendModel(model, body.model, visual, body.visual_model, 0, pin.SE3.Identity())
+    body_frame = max(i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY)
+    return model, visual, body_frame, half
+
+
+def _grid_bodies(path: str, count: int, spacing: float | None, mu: float, base_dir=None, cmodel: str = "spatial"):
+    """`count` free boxes side by side on the ground, in rows of ceil(sqrt(count)), centred on the
+    origin; each box's four bottom corners touch the ground."""
+    model, visual = pin.Model(), pin.GeometryModel()
+    contacts, q_parts = [], []
+    per_row = math.ceil(math.sqrt(count))
+    rows = math.ceil(count / per_row)
+    for k in range(count):
+        model, visual, frame, half = _append_box(model, visual, path, k, base_dir, "array.urdf")
+        step = spacing if spacing is not None else 4.0 * float(max(half[0], half[1]))
+        if spacing is not None and spacing <= 2.0 * float(max(half[0], half[1])):
+            raise SceneError(f"array.spacing = {spacing:g}: the boxes would overlap (their width is "
+                             f"{2 * max(half[0], half[1]):g} m)")
+        i, j = divmod(k, per_row)
+        x, y = (j - (per_row - 1) / 2) * step, (i - (rows - 1) / 2) * step
+        for c, corner in enumerate(_corners(half, z_sign=-1)):
+            contacts.append(_sphere(f"body{k}-corner{c}", frame, corner, 0.0, 0, mu, cmodel))
+        q_parts.append(np.array([x, y, float(half[2]), 0.0, 0.0, 0.0, 1.0]))
+    return model, visual, np.concatenate(q_parts), contacts
+
+
 def _stacked_bodies(paths: list[str], mu: float, halfspaces: list, base_dir=None, cmodel: str = "spatial"):
     """Free-flying URDF boxes stacked on the ground in the listed order: each box's
     bottom corners touch the ground (the first) or the top face of the box below."""
@@ -518,21 +564,7 @@ def _stacked_bodies(paths: list[str], mu: float, halfspaces: list, base_dir=None
     below_frame = None
     below_half = None
     for k, path in enumerate(paths):
-        urdf = _resolve(path, base_dir)
-        body = load_urdf(urdf, True, _package_dirs(urdf), name=f"body{k}")
-        half = _box_half_extents(body.visual_model)
-        if half is None:
-            raise SceneError(f"bodies[{k}] = {path!r}: stacked bodies must be boxes (a URDF with a box visual)")
-        # prefix names so several copies can coexist
-        for f in body.model.frames:
-            f.name = f"{f.name}_{k}" if f.name != "universe" else f.name
-        names = list(body.model.names)
-        for j in range(1, len(names)):
-            body.model.names[j] = f"{names[j]}_{k}"
-        for go in body.visual_model.geometryObjects:
-            go.name = f"{go.name}_{k}"
-        model, visual = pin.appendModel(model, body.model, visual, body.visual_model, 0, pin.SE3.Identity())
-        body_frame = max(i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY)
+        model, visual, body_frame, half = _append_box(model, visual, path, k, base_dir, f"bodies[{k}]")
         if below_frame is None:
             target = 0
         else:

@@ -140,7 +140,18 @@ COLLISION = Table("collision", "General shapes through coal: pairs among the URD
         "spatial", choices=("spatial", "frictionless")),
 ), tables=(BOXES,))
 
-SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf` or `bodies`, the ground, contacts, control, "
+ARRAY = Table("array", "An array of identical free-flying boxes (instead of `robot`, `urdf` or `bodies`): a grid "
+              "side by side on the ground, or a tower; each box's four bottom corners touch the ground or the box "
+              "below", (
+    Key("urdf", "str", "a box URDF (relative: to the scene file's folder, then the bundled robots)", "cube.urdf"),
+    Key("layout", "str", "grid: side by side on the ground (rows of ceil(sqrt(count))); tower: stacked",
+        required=True, choices=("grid", "tower")),
+    Key("count", "int", "number of boxes", required=True, low=1, high=4096),
+    Key("spacing", "float", "grid: centre-to-centre distance in m (default: twice the box's width)",
+        low=0.0, low_open=True),
+))
+
+SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `bodies` or `[array]`, the ground, contacts, control, "
               "the initial state.", (
     Key("name", "str", "scene name (default: the file name)"),
     Key("description", "str", "one line shown by `stiction scenes`", ""),
@@ -158,7 +169,7 @@ SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf` or `bodies`, the
         choices=("timestep", "rk4", "ode", "adaptive")),
     Key("delta", "float", "ODE modes: Baumgarte delta in s (0: dt)", 0.0, low=0.0),
     Key("zeta", "float", "ODE modes: Baumgarte zeta", 0.5, low=0.0, low_open=True),
-), tables=(GROUND, CONTACTS, CONTROL, INITIAL, WALLS, ANCHORS, COLLISION))
+), tables=(GROUND, CONTACTS, CONTROL, INITIAL, WALLS, ANCHORS, COLLISION, ARRAY))
 
 
 def _where(path: str) -> str:
@@ -285,10 +296,14 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
     filled in. Raises SceneError (a ValueError) with one line naming the file, field and value."""
     try:
         out = _validate_table(SCENE, cfg, "")
-        given = [k for k in ("robot", "urdf", "bodies") if k in cfg]
+        given = [k for k in ("robot", "urdf", "bodies", "array") if k in cfg]
         if len(given) != 1:
-            raise SceneError("a scene needs exactly one of `robot`, `urdf` or `bodies`" +
+            raise SceneError("a scene needs exactly one of `robot`, `urdf`, `bodies` or `[array]`" +
                              (f", got {', '.join(given)}" if given else ""))
+        if "array" not in cfg:
+            out["array"] = None
+        elif out["array"]["layout"] == "tower" and out["array"]["spacing"] is not None:
+            raise SceneError("array.spacing applies to layout = \"grid\" only")
         if out["mode"] == "timestep" and "delta" in cfg:
             raise SceneError("delta applies to the ODE modes (mode = rk4, ode or adaptive) only")
         if "joint" in cfg and "free_flyer" in cfg and (out["joint"] == "free_flyer") != out["free_flyer"]:

@@ -379,6 +379,13 @@ class Simulator:
             contact_rows = int(traj.rows[1:].sum(axis=1).max())
         else:
             rows_per_contact, contact_rows = [0] * traj.gaps.shape[1], 0
+        # every free body's largest displacement from where it was after settling
+        body_drift = 0.0
+        for j in range(1, sc.model.njoints):
+            if sc.model.joints[j].shortname() == "JointModelFreeFlyer":
+                iq = sc.model.joints[j].idx_q
+                d = np.linalg.norm(traj.q[after][:, iq:iq + 3] - traj.q[i0, iq:iq + 3], axis=1).max()
+                body_drift = max(body_drift, float(d))
         tim = np.median(traj.timings[1:], axis=0) if len(traj.t) > 1 else np.zeros(5)
         out = {
             "scene": sc.name,
@@ -388,6 +395,7 @@ class Simulator:
             "duration": float(traj.t[-1] - traj.t[0]),
             "steps": int(len(traj.t) - 1),
             "contacts": len(sc.contacts),
+            "max_body_drift": body_drift,
             "us_per_step": float(tim[4]),
             "us_per_phase": {p: float(x) for p, x in zip(PHASES[:4], tim[:4])},
             "max_penetration": float(max(0.0, -np.nanmin(np.where(np.isfinite(traj.gaps), traj.gaps, np.nan))))
