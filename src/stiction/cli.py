@@ -270,6 +270,32 @@ def cmd_formulations(args) -> int:
     return 0
 
 
+def cmd_bench(args) -> int:
+    if args.bench != "scaling":  # argparse restricts the choices; kept for the message
+        raise ValueError(f"unknown benchmark {args.bench!r}")
+    from .bench import scaling
+
+    if args.plot:
+        _output_path("--plot", args.plot, (".png", ".pdf", ".svg"))
+        require("matplotlib", "plot", "--plot")
+    sizes = args.sizes or ([4, 16, 64] if args.quick else [4, 16, 64, 128, 256])
+    steps = 50 if args.quick else args.steps
+    progress = None if args.json else (lambda r: print(
+        f"{r['contacts']:6d} contacts  {r['us_per_step']:10.1f} µs/step  {r['peak_memory_mb']:8.0f} MB"
+        + ("" if r["mujoco_us_per_step"] is None else f"  MuJoCo {r['mujoco_us_per_step']:9.1f} µs/step"),
+        flush=True))
+    result = scaling.run(sizes, steps=steps, progress=progress)
+    if args.plot:
+        scaling.plot(result, args.plot)
+    if args.json:
+        json.dump(result, sys.stdout, indent=1)
+        sys.stdout.write("\n")
+    else:
+        print(f"fitted exponent {result['exponent']:.2f}" + (
+            "" if result["mujoco_exponent"] is None else f" (MuJoCo {result['mujoco_exponent']:.2f})"))
+    return 0
+
+
 def cmd_solvers(args) -> int:
     for name in solver_names():
         print(name)
@@ -377,6 +403,15 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("formulations", help="list the formulations: name, the paper's equations, parameters")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_formulations)
+
+    p = sub.add_parser("bench", help="benchmarks: scaling (cost per step against contact count)")
+    p.add_argument("bench", choices=["scaling"])
+    p.add_argument("--json", action="store_true", help='print {"rows": [...], "exponent": ...}')
+    p.add_argument("--plot", metavar="FILE.png", help="the log-log chart")
+    p.add_argument("--quick", action="store_true", help="4, 16, 64 contacts, 50 steps")
+    p.add_argument("--sizes", type=_positive_int, nargs="+", metavar="N", help="contact counts (multiples of 4)")
+    p.add_argument("--steps", type=_positive_int, default=200, help="timed steps per size (default 200)")
+    p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("solvers", help="list the solver names")
     p.set_defaults(func=cmd_solvers)

@@ -1,0 +1,131 @@
+"""Cost per step against contact count: a grid of free cubes on the ground (4 corner contacts each,
+1 kg, 10 cm, mu = 0.5, dt = 1 ms, time stepping, exact law to 1e-10), N = 4 ... contacts.
+
+Each size runs in its own subprocess (so ``peak_memory_mb``, the process's peak resident memory,
+is that size's), simulates ``steps`` steps after ``warmup`` untimed ones, and reports the median
+of the per-step C++ timings. MuJoCo 4.0 (the optional ``bench`` extra) runs the same grid when it
+is importable: free boxes on a plane, elliptic cones, Newton, tolerance 1e-10, the same masses,
+mu and dt (its timing: the median over repeated blocks of ``mj_step`` calls, wall clock).
+
+The fitted exponent is the least-squares slope of log(us_per_step) against log(contacts).
+"""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import time
+
+MEASURE = r"""
+import json, resource, sys, time
+import numpy as np
+from stiction.scene import build_scene
+from stiction.simulator import Simulator
+cubes, steps, warmup = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+sim = Simulator(build_scene({"name": f"cube-grid-{4 * cubes}", "array": {"layout": "grid", "count": cubes},
+                             "ground": {"mu": 0.5}}))
+sim.rollout(warmup * sim.dt)
+traj = sim.rollout(steps * sim.dt)
+s = sim.summary(traj)
+print(json.dumps({"us_per_step": float(np.median(traj.timings[1:, 4])), "all_converged": s["all_converged"],
+                  "max_penetration": s["max_penetration"], "max_body_drift": s["max_body_drift"],
+                  "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}))
+"""
+
+
+def mujoco_grid_xml(cubes: int, spacing: float = 0.2) -> str:
+    per_row = math.ceil(math.sqrt(cubes))
+    rows = math.ceil(cubes / per_row)
+    bodies = []
+    for k in range(cubes):
+        i, j = divmod(k, per_row)
+        x, y = (j - (per_row - 1) / 2) * spacing, (i - (rows - 1) / 2) * spacing
+        bodies.append(f'<body pos="{x} {y} 0.05"><freejoint/><geom type="box" size="0.05 0.05 0.05" mass="1"/></body>')
+    return f"""<mujoco><option timestep="0.001" cone="elliptic" solver="Newton" tolerance="1e-10" iterations="100"/>
+<default><geom friction="0.5 0 0" condim="3"/></default>
+<worldbody><geom type="plane" size="10 10 0.1"/>{''.join(bodies)}</worldbody></mujoco>"""
+
+
+def mujoco_us_per_step(cubes: int, steps: int, warmup: int) -> float | None:
+    try:
+        import mujoco
+    except ImportError:
+        return None
+    model = mujoco.MjModel.from_xml_string(mujoco_grid_xml(cubes))
+    data = mujoco.MjData(model)
+    for _ in range(warmup):
+        mujoco.mj_step(model, data)
+    blocks = []
+    per_block = max(1, steps // 10)
+    for _ in range(10):
+        t0 = time.perf_counter()
+        for _ in range(per_block):
+            mujoco.mj_step(model, data)
+        blocks.append((time.perf_counter() - t0) / per_block * 1e6)
+    blocks.sort()
+    return blocks[len(blocks) // 2]
+
+
+def fit_exponent(contacts: list[int], us: list[float]) -> float | None:
+    pts = [(math.log(c), math.log(u)) for c, u in zip(contacts, us) if u and u > 0]
+    if len(pts) < 2:
+        return None
+    mx = sum(p[0] for p in pts) / len(pts)
+    my = sum(p[1] for p in pts) / len(pts)
+    sxx = sum((p[0] - mx) ** 2 for p in pts)
+    return sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx if sxx > 0 else None
+
+
+def run(sizes: list[int], steps: int = 200, warmup: int = 20, progress=None) -> dict:
+    """sizes: contact counts (multiples of 4). Returns {"command", "rows", "exponent", "mujoco_exponent"}."""
+    rows = []
+    for contacts in sizes:
+        if contacts < 4 or contacts % 4:
+            raise ValueError(f"contact counts must be positive multiples of 4 (4 corners per cube), got {contacts}")
+        cubes = contacts // 4
+        out = subprocess.run([sys.executable, "-c", MEASURE, str(cubes), str(steps), str(warmup)],
+                             capture_output=True, text=True)
+        if out.returncode != 0:
+            raise RuntimeError(f"cube grid of {contacts} contacts failed: {out.stderr.strip().splitlines()[-1:]}")
+        m = json.loads(out.stdout.strip().splitlines()[-1])
+        row = {"scene": f"cube-grid-{contacts}", "contacts": contacts, "us_per_step": m["us_per_step"],
+               "us_per_contact": m["us_per_step"] / contacts, "peak_memory_mb": m["peak_memory_mb"],
+               "mujoco_us_per_step": mujoco_us_per_step(cubes, steps, warmup),
+               "all_converged": m["all_converged"], "max_penetration": m["max_penetration"],
+               "max_body_drift": m["max_body_drift"]}
+        rows.append(row)
+        if progress:
+            progress(row)
+    result = {"command": "stiction bench scaling", "rows": rows,
+              "exponent": fit_exponent([r["contacts"] for r in rows], [r["us_per_step"] for r in rows])}
+    mj = [r["mujoco_us_per_step"] for r in rows]
+    result["mujoco_exponent"] = fit_exponent([r["contacts"] for r in rows], mj) if all(mj) else None
+    return result
+
+
+def plot(result: dict, path: str) -> None:
+    from .._optional import require
+
+    require("matplotlib", "plot", "the scaling chart")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = result["rows"]
+    n = [r["contacts"] for r in rows]
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    ax.loglog(n, [r["us_per_step"] for r in rows], "o-", label=f"stiction (exponent {result['exponent']:.2f})")
+    if result.get("mujoco_exponent") is not None:
+        ax.loglog(n, [r["mujoco_us_per_step"] for r in rows], "s--",
+                  label=f"MuJoCo 4.0 (exponent {result['mujoco_exponent']:.2f})")
+    ax.set_xlabel("contacts (cube grid, 4 per cube)")
+    ax.set_ylabel("µs per step (median)")
+    ax.set_title("Cost per step against contact count")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.text(0.01, 0.01, "stiction bench scaling; " + time.strftime("%Y-%m-%d") + f"; {sys.platform}", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

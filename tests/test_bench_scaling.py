@@ -1,0 +1,32 @@
+"""`stiction bench scaling`: the JSON the charts issue builds on (never a timed assertion)."""
+import json
+
+import pytest
+
+from stiction.bench import scaling
+from stiction.cli import main
+
+
+def test_scaling_json_has_one_row_per_size_and_an_exponent(capsys):
+    assert main(["bench", "scaling", "--sizes", "4", "8", "--steps", "5", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["command"] == "stiction bench scaling"
+    assert [r["contacts"] for r in out["rows"]] == [4, 8]
+    for r in out["rows"]:
+        assert set(r) >= {"scene", "contacts", "us_per_step", "us_per_contact", "peak_memory_mb", "mujoco_us_per_step"}
+        assert r["us_per_step"] > 0 and r["us_per_contact"] == pytest.approx(r["us_per_step"] / r["contacts"])
+        assert r["peak_memory_mb"] > 10 and r["all_converged"]
+        assert r["max_penetration"] <= 1e-9 and r["max_body_drift"] <= 1e-9  # the grid rests exactly
+        assert r["mujoco_us_per_step"] is None or r["mujoco_us_per_step"] > 0
+    assert isinstance(out["exponent"], float)
+
+
+def test_exponent_fit_is_the_log_log_slope():
+    assert scaling.fit_exponent([4, 16, 64], [1.0, 4.0, 16.0]) == pytest.approx(1.0)
+    assert scaling.fit_exponent([4, 16, 64], [1.0, 16.0, 256.0]) == pytest.approx(2.0)
+    assert scaling.fit_exponent([4], [1.0]) is None
+
+
+def test_contact_counts_must_be_whole_cubes(capsys):
+    assert main(["bench", "scaling", "--sizes", "6", "--json"]) == 2
+    assert "multiples of 4" in capsys.readouterr().err
