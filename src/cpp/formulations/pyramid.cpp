@@ -29,11 +29,61 @@
 
 #include <proxsuite/proxqp/dense/dense.hpp>
 
+#include "stiction/cone.hpp"
 #include "stiction/verdict.hpp"
+
+#include <Eigen/Cholesky>
 #include "formulations.hpp"
 
 namespace stiction {
 namespace {
+
+// The pyramid of one spatial block at unit normal force: facet normals at 2 pi k / N, facet
+// distance mu_f; corners at radius mu_f / cos(pi / N), angles (2k + 1) pi / N.
+struct Pyramid {
+  int N;
+  double mu_f, corner_radius;
+  double supportOfMinus(double u1, double u2) const {  // max over the corners v_j . (-u_t), per unit mu
+    double best = -1e300;
+    for (int k = 0; k < N; ++k) {
+      const double a = (2.0 * k + 1.0) * M_PI / N;
+      best = std::max(best, -(std::cos(a) * u1 + std::sin(a) * u2));
+    }
+    return corner_radius * best;
+  }
+  bool contains(const Eigen::Vector3d& x) const {
+    if (x[2] < 0.0) return false;
+    for (int k = 0; k < N; ++k)
+      if (std::cos(2.0 * M_PI * k / N) * x[0] + std::sin(2.0 * M_PI * k / N) * x[1] > mu_f * x[2] * (1 + 1e-15))
+        return false;
+    return true;
+  }
+  Eigen::Vector3d edge(int j) const {
+    const double a = (2.0 * j + 1.0) * M_PI / N;
+    return Eigen::Vector3d(corner_radius * std::cos(a), corner_radius * std::sin(a), 1.0);
+  }
+  // Euclidean projection onto the polyhedral cone: the nearest of its faces (2-D cones spanned by
+  // two consecutive edges), edges and apex.
+  Eigen::Vector3d project(const Eigen::Vector3d& x) const {
+    if (contains(x)) return x;
+    Eigen::Vector3d best = Eigen::Vector3d::Zero();
+    double best_d = x.squaredNorm();
+    for (int j = 0; j < N; ++j) {
+      const Eigen::Vector3d a = edge(j), b = edge((j + 1) % N);
+      const double ta = std::max(0.0, a.dot(x) / a.squaredNorm());  // the edge ray
+      const Eigen::Vector3d pe = ta * a;
+      if ((x - pe).squaredNorm() < best_d) best_d = (x - pe).squaredNorm(), best = pe;
+      Eigen::Matrix2d G;  // the face: x's projection on span(a, b) with non-negative weights
+      G << a.dot(a), a.dot(b), a.dot(b), b.dot(b);
+      const Eigen::Vector2d c = G.ldlt().solve(Eigen::Vector2d(a.dot(x), b.dot(x)));
+      if (c[0] >= 0.0 && c[1] >= 0.0) {
+        const Eigen::Vector3d pf = c[0] * a + c[1] * b;
+        if ((x - pf).squaredNorm() < best_d) best_d = (x - pf).squaredNorm(), best = pf;
+      }
+    }
+    return best;
+  }
+};
 
 class PyramidFormulation final : public Formulation {
  public:
@@ -103,19 +153,22 @@ class PyramidFormulation final : public Formulation {
     const double b_inf = problem.b().lpNorm<Eigen::Infinity>();
 
     pq::dense::QP<double> qp(m, 0, n_in);
+    const double own_tolerance = settings.tolerance;
     qp.settings.eps_rel = std::max(settings.tolerance, 1e-13);
     qp.settings.eps_abs = std::max(1e-300, qp.settings.eps_rel * std::min(b_inf, b_inf / max_diag));
     qp.settings.eps_primal_inf = 1e-12;
     qp.settings.verbose = false;
-    qp.settings.max_iter = std::max(1, settings.proxqp_max_iterations);
+    // At most proxqp_max_iterations inner iterations per QP: ProxQP's own budget is
+    // max_iter (outer) x max_iter_in (inner, 1500 by default) -- left as max_iter alone it
+    // allowed 30 million, measured: 98 s on one 12-variable QP (8 facets).
+    const long budget = std::max(1, settings.proxqp_max_iterations);
+    qp.settings.max_iter_in = std::min<long>(budget, 1500);
+    qp.settings.max_iter = std::max<long>(1, budget / qp.settings.max_iter_in);
     qp.init(H_, g_, proxsuite::nullopt, proxsuite::nullopt, C_, lower_, upper_);
     // Warm start from the caller's lambda (the previous step) when there is one.
-    if (result.lam.size() == m && result.lam.squaredNorm() > 0.0) {
-      qp.settings.initial_guess = pq::InitialGuessStatus::WARM_START;
-      qp.solve(result.lam, proxsuite::nullopt, Eigen::VectorXd::Zero(n_in));
-    } else {
-      qp.solve();
-    }
+    // (No warm start from the previous step's lambda: without its multipliers ProxQP started
+    // from it converged worse than cold, measured on a pushed cube with 8 facets.)
+    qp.solve();
     int qp_iterations = static_cast<int>(qp.results.info.iter);
     result.own_converged = false;
     result.message = "fixed point on the De Saxce term did not settle";
@@ -150,7 +203,7 @@ class PyramidFormulation final : public Formulation {
       }
       result.own_residual = (s_new_ - s_).norm() / scale;
       s_ = s_new_;
-      if (result.own_residual <= settings.tolerance) {
+      if (result.own_residual <= own_tolerance) {
         result.own_converged = true;
         result.message = "converged";
         break;
@@ -182,9 +235,105 @@ class PyramidFormulation final : public Formulation {
     result.iterations = outer;
     result.stages.push_back({"proxqp (pyramid QPs)", qp_iterations,
                              std::chrono::duration<double>(Clock::now() - start).count(), result.message});
+    if (!result.own_converged && qp.results.info.status != pq::QPSolverOutput::PROXQP_DUAL_INFEASIBLE) {
+      // ProxQP misses tight tolerances on some of these QPs (A only semi-definite, a degenerate
+      // apex; measured: a third of a pushed cube's steps with 8 facets at 1e-10): finish with ADMM
+      // on the same LCP, projecting exactly onto the pyramids, from ProxQP's iterate.
+      const auto t0 = Clock::now();
+      const Pyramid shape{N, facet_mu, corner_radius};
+      const int its = admm(problem, A, shape, settings, result.lam, result.own_residual, result.own_converged);
+      const std::string outcome = result.own_converged ? "converged" : "iteration limit reached";
+      result.message = result.own_converged ? "converged (ADMM after ProxQP)" : "ProxQP then ADMM: " + outcome;
+      result.iterations += its;
+      result.stages.push_back({"admm (pyramid projection)", its,
+                               std::chrono::duration<double>(Clock::now() - t0).count(), outcome});
+    }
   }
 
  private:
+  // ADMM on the pyramid LCP: (A + rho I) x = b - E s + rho z - y, z = P_pyramid(x + y / rho),
+  // y += rho (x - z), s = s_P(A x - b) refreshed from the unconstrained iterate (as the exact
+  // ADMM does with the cone). Stops on ||lambda - P(lambda - w)|| <= tol ||b||, w = u + E s_P(u).
+  int admm(const ContactProblem& problem, const Eigen::MatrixXd& A, const Pyramid& shape,
+           const SolverSettings& settings, Eigen::VectorXd& lam, double& residual, bool& converged) {
+    const auto& cons = problem.constraints();
+    const auto& off = problem.offsets();
+    const Eigen::Index m = problem.numRows();
+    const double scale = stoppingScale(problem);
+    auto projectAll = [&](Eigen::VectorXd& x) {
+      for (std::size_t i = 0; i < cons.size(); ++i) {
+        auto xi = x.segment(off[i], cons[i].size);
+        switch (cons[i].kind) {
+          case ConstraintKind::kBilateral: break;
+          case ConstraintKind::kUnilateral: xi[0] = std::max(0.0, xi[0]); break;
+          case ConstraintKind::kPlanarFriction: projectPlanarCone(xi, cons[i].mu); break;
+          case ConstraintKind::kSpatialFriction: {
+            if (cons[i].mu <= 0.0) {
+              xi[0] = xi[1] = 0.0;
+              xi[2] = std::max(0.0, xi[2]);
+              break;
+            }
+            const Pyramid p{shape.N, shape.mu_f * cons[i].mu, shape.corner_radius * cons[i].mu};
+            xi = p.project(Eigen::Vector3d(xi[0], xi[1], xi[2]));
+            break;
+          }
+        }
+      }
+    };
+    auto shift = [&](const Eigen::VectorXd& u, Eigen::VectorXd& es) {  // E s_P(u)
+      es.setZero(m);
+      for (std::size_t i = 0; i < cons.size(); ++i) {
+        const Eigen::Index o = off[i];
+        if (cons[i].kind == ConstraintKind::kPlanarFriction) es[o + 1] = cons[i].mu * std::abs(u[o]);
+        if (cons[i].kind == ConstraintKind::kSpatialFriction)
+          es[o + 2] = cons[i].mu * shape.supportOfMinus(u[o], u[o + 1]);
+      }
+    };
+    const double L = std::max(A.diagonal().maxCoeff(), 1e-300);
+    double rho = 0.1 * L;
+    Eigen::MatrixXd K = 0.5 * (A + A.transpose());
+    K.diagonal().array() += rho;
+    Eigen::LLT<Eigen::MatrixXd> llt(K);
+    Eigen::VectorXd z = lam, x = lam, y = Eigen::VectorXd::Zero(m), u(m), es(m), w(m), r(m), zp(m);
+    projectAll(z);
+    converged = false;
+    int it = 0;
+    for (; it < settings.max_iterations; ++it) {
+      u.noalias() = A * x;
+      u -= problem.b();
+      shift(u, es);
+      r = problem.b() - es + rho * z - y;
+      x = llt.solve(r);
+      zp = z;
+      z = x + y / rho;
+      projectAll(z);
+      y += rho * (x - z);
+      // the pyramid LCP's natural map at z
+      u.noalias() = A * z;
+      u -= problem.b();
+      shift(u, es);
+      w = z - (u + es);
+      projectAll(w);
+      residual = (z - w).norm() / scale;
+      if (residual <= settings.tolerance) {
+        converged = true;
+        ++it;
+        break;
+      }
+      if ((it + 1) % 10 == 0) {  // residual balancing
+        const double pr = (x - z).lpNorm<Eigen::Infinity>(), dr = rho * (z - zp).lpNorm<Eigen::Infinity>();
+        const double f = pr > 10 * dr ? 5.0 : dr > 10 * pr ? 0.2 : 1.0;
+        if (f != 1.0 && rho * f > 1e-8 * L && rho * f < 1e4 * L) {
+          K.diagonal().array() += rho * (f - 1.0);
+          rho *= f;
+          llt.compute(K);
+        }
+      }
+    }
+    lam = z;
+    return it;
+  }
+
   Eigen::MatrixXd C_, H_;
   Eigen::VectorXd lower_, upper_, g_, s_, s_new_, u_;
 };
