@@ -1,0 +1,157 @@
+// SimulatorModel and SimulatorData: construction and validation of the model (every index,
+// radius, friction coefficient and setting checked before anything runs), and the workspace
+// sized once for it.
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+#include <pinocchio/algorithm/joint-configuration.hpp>
+
+#include "stiction/rk4_stability.hpp"
+#include "stiction/simulator.hpp"
+
+namespace stiction {
+
+namespace {
+
+void completeTangents(HalfSpace& h) {
+  const double n = h.normal.norm();
+  if (!(n > 0.0) || !h.normal.allFinite())
+    throw std::invalid_argument("half-space '" + h.name + "': normal must be a finite non-zero vector");
+  h.normal /= n;
+  // t1: the world x axis projected on the plane (y if x is along the normal).
+  Eigen::Vector3d e = std::abs(h.normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  h.tangent1 = (e - h.normal * h.normal.dot(e)).normalized();
+  h.tangent2 = h.normal.cross(h.tangent1);  // (t1, t2, n) right-handed
+}
+
+}  // namespace
+
+SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfSpace> halfspaces_,
+                               std::vector<SphereContact> contacts_, std::vector<PointAnchor> anchors_,
+                               SimulatorSettings settings_, const pinocchio::GeometryModel& geometry_,
+                               std::vector<GeometryPairContact> pairs_)
+    : model(model_),
+      halfspaces(std::move(halfspaces_)),
+      contacts(std::move(contacts_)),
+      anchors(std::move(anchors_)),
+      settings(std::move(settings_)),
+      geometry(geometry_),
+      pairs(std::move(pairs_)) {
+  for (HalfSpace& h : halfspaces) completeTangents(h);
+  const auto nframes = static_cast<pinocchio::FrameIndex>(model.nframes);
+  for (const HalfSpace& h : halfspaces)
+    if (h.frame >= nframes)
+      throw std::invalid_argument("half-space '" + h.name + "': frame index " + std::to_string(h.frame) +
+                                  " does not exist");
+  for (const SphereContact& c : contacts) {
+    if (c.frame >= nframes)
+      throw std::invalid_argument("contact '" + c.name + "': frame index " + std::to_string(c.frame) +
+                                  " does not exist (model has " + std::to_string(nframes) + " frames)");
+    if (c.halfspace < 0 || c.halfspace >= static_cast<int>(halfspaces.size()))
+      throw std::invalid_argument("contact '" + c.name + "': half-space index " +
+                                  std::to_string(c.halfspace) + " does not exist");
+    if (!(c.radius >= 0.0) || !std::isfinite(c.radius))
+      throw std::invalid_argument("contact '" + c.name + "': radius must be finite and >= 0");
+    if (!(c.mu >= 0.0) || !std::isfinite(c.mu))
+      throw std::invalid_argument("contact '" + c.name + "': friction coefficient mu must be finite and >= 0");
+    if (!c.offset.allFinite()) throw std::invalid_argument("contact '" + c.name + "': offset is not finite");
+  }
+  for (const PointAnchor& a : anchors) {
+    if (a.frame >= nframes || a.frame2 >= nframes)
+      throw std::invalid_argument("anchor '" + a.name + "': frame index " +
+                                  std::to_string(std::max(a.frame, a.frame2)) + " does not exist");
+    if (!a.offset2.allFinite()) throw std::invalid_argument("anchor '" + a.name + "': offset2 is not finite");
+    if (!a.offset.allFinite() || !a.target.allFinite())
+      throw std::invalid_argument("anchor '" + a.name + "': offset and target must be finite");
+  }
+  const SimulatorSettings& s = settings;
+  if (!(s.dt > 0.0) || !std::isfinite(s.dt)) throw std::invalid_argument("dt must be positive and finite");
+  if (s.delta < 0.0 || !std::isfinite(s.delta)) throw std::invalid_argument("delta must be >= 0 (0: dt)");
+  if (!(s.zeta > 0.0) || !std::isfinite(s.zeta)) throw std::invalid_argument("zeta must be positive");
+  if (!(s.ode_tolerance > 0.0)) throw std::invalid_argument("ode_tolerance must be positive");
+  if (!(s.activation_distance >= 0.0)) throw std::invalid_argument("activation_distance must be >= 0");
+  if (!(s.min_dt > 0.0)) throw std::invalid_argument("min_dt must be positive");
+  if (s.mode == IntegrationMode::kRK4) {
+    // Explicit RK4 on eq. 64 is stable only for dt below ~2.6 delta (zeta = 1/2): beyond,
+    // a cube at rest on a slope leaves at 173 m/s. Refuse rather than blow up.
+    const double delta = s.delta > 0.0 ? s.delta : s.dt;
+    const double limit = rk4StableStep(delta, s.zeta);
+    if (s.dt > limit) {
+      std::ostringstream os;
+      os << "rk4: dt = " << s.dt << " is too large for the contact relaxation (eq. 64) with delta = " << delta
+         << ", zeta = " << s.zeta << ": RK4 is stable up to " << rk4StabilityLimit(delta, s.zeta)
+         << " s; the largest stable dt accepted is " << limit << " s (" << limit / delta
+         << " delta). Use dt <= " << limit << ", a larger delta, or mode 'adaptive' (which controls its step)";
+      throw std::invalid_argument(os.str());
+    }
+  }
+  makeSolver(s.solver);  // throws on an unknown name
+  makeFormulation(s.formulation, s.formulation_settings);  // unknown name or bad parameter
+  if (s.formulation == "penalty" && s.mode != IntegrationMode::kTimeStepping)
+    throw std::invalid_argument(
+        "the penalty formulation integrates its springs by implicit Euler over the time step (Kikuuwe-Fujimoto, "
+        "eq. 83-84): it needs mode 'timestep', not an ODE mode");
+  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+    if (model.joints[j].shortname() == "JointModelFreeFlyer") free_flyers.push_back(j);
+  slot_pair.assign(contacts.size(), -1);
+  for (std::size_t p = 0; p < pairs.size(); ++p) {
+    const GeometryPairContact& g = pairs[p];
+    if (g.pair >= geometry.collisionPairs.size())
+      throw std::invalid_argument("pair '" + g.name + "': collision pair index " + std::to_string(g.pair) +
+                                  " does not exist (the geometry model has " +
+                                  std::to_string(geometry.collisionPairs.size()) + " pairs)");
+    if (!(g.mu >= 0.0) || !std::isfinite(g.mu))
+      throw std::invalid_argument("pair '" + g.name + "': friction coefficient mu must be finite and >= 0");
+    if (g.max_contacts < 1 || g.max_contacts > 64)
+      throw std::invalid_argument("pair '" + g.name + "': max_contacts must be in 1..64");
+    if (g.model == ContactModel::kPlanar)
+      throw std::invalid_argument("pair '" + g.name + "': the planar contact model applies to sphere contacts only "
+                                  "(a coal pair is spatial or frictionless)");
+    for (int k = 0; k < g.max_contacts; ++k) slot_pair.push_back(static_cast<int>(p));
+  }
+  num_candidates = static_cast<int>(slot_pair.size());
+}
+
+SimulatorData::SimulatorData(const SimulatorModel& sim)
+    : data(sim.model),
+      q(pinocchio::neutral(sim.model)),
+      v(Eigen::VectorXd::Zero(sim.model.nv)),
+      geometry_data(sim.geometry),
+      solver(makeSolver(sim.settings.solver)) {
+  FormulationSettings fs = sim.settings.formulation_settings;
+  fs.exact_solver = sim.settings.solver;
+  solver = makeFormulation(sim.settings.formulation, fs);
+  const int nv = sim.model.nv;
+  control.kp = Eigen::VectorXd::Zero(nv);
+  control.kd = Eigen::VectorXd::Zero(nv);
+  control.q_target = q;
+  control.v_target = Eigen::VectorXd::Zero(nv);
+  control.tau_ff = Eigen::VectorXd::Zero(nv);
+  const int nc = sim.numCandidates();
+  gaps = Eigen::VectorXd::Zero(nc);
+  slot_point = slot_normal = slot_t1 = slot_t2 = Eigen::Matrix3Xd::Zero(3, nc);
+  for (const GeometryPairContact& g : sim.pairs) {
+    coal::CollisionRequest& req = geometry_data.collisionRequests[g.pair];
+    req.num_max_contacts = static_cast<size_t>(g.max_contacts);
+    req.security_margin = sim.settings.activation_distance;
+    req.enable_contact = true;
+  }
+  J6.resize(6, nv);
+  tau.resize(nv);
+  nle.resize(nv);
+  zero_nv = Eigen::VectorXd::Zero(nv);
+  v_free.resize(nv);
+  dv.resize(nv);
+  candidate_lambda = Eigen::MatrixXd::Zero(3, nc);
+  have_candidate_lambda.assign(nc, false);
+  anchor_lambda = Eigen::MatrixXd::Zero(3, sim.anchors.size());
+  candidate_spring = Eigen::MatrixXd::Zero(3, nc);
+  candidate_velocity = Eigen::MatrixXd::Zero(3, nc);
+  candidate_states.assign(nc, ContactState::kOpen);
+  candidate_rows.assign(nc, 0);
+}
+
+}  // namespace stiction

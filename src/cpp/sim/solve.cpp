@@ -1,0 +1,159 @@
+// Stage 5, the solve: eq. 65 for the Delassus stage's A and b, by the model's formulation
+// (the exact law with its solver, or ccp, nakaoka, pyramid, penalty, pinocchio-*), warm-started
+// from the previous step; then per-candidate forces and states. Eigen and the solver core only.
+#include <algorithm>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+#include "stages.hpp"
+
+namespace stiction {
+namespace stages {
+
+namespace {
+
+// Forces whose own rounding moves the residual by more than kLooseTolerance (relative
+// to ||b||) diverged, whatever the tolerance (verdict.hpp).
+constexpr double kDivergedFloor = kLooseTolerance;
+
+// The name of block `blk` of the current problem: a candidate contact, then the anchors.
+std::string blockName(const SimulatorModel& sim, const SimulatorData& sd, int blk) {
+  if (blk < static_cast<int>(sd.active.size())) {
+    const int i = sd.active[blk];
+    if (sim.slot_pair[i] < 0) return "contact '" + sim.contacts[i].name + "'";
+    const int first_slot = static_cast<int>(sim.contacts.size());
+    int slot = i - first_slot;
+    for (int p = 0; p < sim.slot_pair[i]; ++p) slot -= sim.pairs[p].max_contacts;
+    return "contact '" + sim.pairs[sim.slot_pair[i]].name + "#" + std::to_string(slot) + "'";
+  }
+  return "anchor '" + sim.anchors[blk - sd.active.size()].name + "'";
+}
+
+// Why a step cannot go on: the contact problem has no solution, or none double
+// precision can resolve; names the contacts involved and t.
+std::string unsolvableMessage(const SimulatorModel& sim, const SimulatorData& sd) {
+  std::ostringstream os;
+  const SolverResult& r = sd.result;
+  if (r.status == SolveStatus::kInfeasible)
+    os << "the contact problem at t = " << sd.t << " has no solution";
+  else if (r.status == SolveStatus::kUnresolvable)
+    os << "the contact forces at t = " << sd.t << " diverged beyond what double precision can resolve";
+  else
+    os << "the contact solve returned non-finite forces at t = " << sd.t;
+  std::vector<int> blocks = r.implicated_blocks;
+  if (blocks.empty()) {  // the largest forces
+    double worst = 0.0;
+    for (std::size_t k = 0; k + 1 < sd.problem->offsets().size(); ++k)
+      worst = std::max(worst, r.lam.segment(sd.problem->offsets()[k], sd.problem->constraints()[k].size).norm());
+    for (std::size_t k = 0; k + 1 < sd.problem->offsets().size(); ++k)
+      if (r.lam.segment(sd.problem->offsets()[k], sd.problem->constraints()[k].size).norm() >= 0.1 * worst)
+        blocks.push_back(static_cast<int>(k));
+  }
+  os << " (";
+  for (std::size_t k = 0; k < blocks.size(); ++k) os << (k ? ", " : "") << blockName(sim, sd, blocks[k]);
+  os << "): " << r.message;
+  if (r.status == SolveStatus::kInfeasible)
+    os << ". A contact on a body that cannot move (the world, a fixed joint) and starts penetrating, "
+          "or a body squeezed between contacts it cannot escape, makes the forces grow without bound.";
+  return os.str();
+}
+
+}  // namespace
+
+void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
+  const Eigen::Index rows = sd.J.rows();
+  if (!sd.A.allFinite() || !sd.b.allFinite())
+    throw std::runtime_error("simulation diverged: non-finite Delassus operator or right-hand side at t = " +
+                             std::to_string(sd.t));
+  // Rebuild the problem only when the active set changed.
+  if (!sd.problem || sd.active != sd.problem_active) {
+    std::vector<Constraint> cons;
+    for (int i : sd.active)
+      switch (sd.candidate_rows[i]) {
+        case 1: cons.push_back(Constraint::unilateral()); break;
+        case 2: cons.push_back(Constraint::planarFriction(candidateMu(sim, i))); break;
+        default: cons.push_back(Constraint::spatialFriction(candidateMu(sim, i)));
+      }
+    for (std::size_t a = 0; a < sim.anchors.size(); ++a) cons.push_back(Constraint::bilateral(3));
+    sd.delassus = std::make_shared<DenseDelassus>(sd.A);
+    // A = W^T W is semi-definite by construction: no Cholesky check per active-set change.
+    sd.problem = std::make_unique<ContactProblem>(sd.delassus, scale * sd.b, std::move(cons), 1e-6, false);
+    sd.problem_active = sd.active;
+  } else {
+    sd.delassus->matrix() = sd.A;
+    sd.b_scaled = scale * sd.b;
+    sd.problem->setB(sd.b_scaled);
+  }
+  // Warm start: the last lambda of each candidate that is active again.
+  SolverSettings settings = sim.settings.solver_settings;
+  sd.guess.resize(rows);
+  bool any = false;
+  Eigen::Index row = 0;
+  for (int i : sd.active) {
+    const int k = sd.candidate_rows[i];
+    if (sd.have_candidate_lambda[i]) {
+      any = true;
+      fromSlots(scale * sd.candidate_lambda.col(i), k, sd.guess.data() + row);
+    } else {
+      sd.guess.segment(row, k).setZero();
+    }
+    row += k;
+  }
+  for (std::size_t a = 0; a < sim.anchors.size(); ++a, row += 3) {
+    sd.guess.segment<3>(row) = scale * sd.anchor_lambda.col(a);
+    any = any || sd.anchor_lambda.col(a).squaredNorm() > 0.0;
+  }
+  settings.warm_start = sim.settings.warm_start && any ? WarmStart::kGiven : WarmStart::kNone;
+  const bool exact = sd.solver->exactLaw();
+  if (!exact) {  // what the other formulations may know of the step (formulation.hpp)
+    StepContext context;
+    context.h = scale;
+    context.position_error = &sd.position_error;
+    sd.spring_rows.setZero(rows);
+    row = 0;
+    for (int i : sd.active) {
+      const int k = sd.candidate_rows[i];
+      if (k > 1) fromSlots(sd.candidate_spring.col(i), k, sd.spring_rows.data() + row);
+      sd.spring_rows[row + k - 1] = 0.0;
+      row += k;
+    }
+    context.state = &sd.spring_rows;
+    setFormulationContext(*sd.solver, context);
+  }
+  solve(*sd.problem, *sd.solver, settings, sd.result, &sd.guess);
+  // Infeasible, or forces so large that not even a loose 1e-6 could be verified: the
+  // step cannot go on. (An unreachable tolerance such as 1e-300 is also "unresolvable",
+  // with a tiny floor: that step is only recorded as unconverged.)
+  // Other formulations are only measured by the exact law: they stop on non-finite impulses.
+  if (sd.result.status == SolveStatus::kInfeasible || !sd.result.lam.allFinite() ||
+      (exact && sd.result.status == SolveStatus::kUnresolvable && sd.result.precision_floor > kDivergedFloor))
+    throw std::runtime_error(unsolvableMessage(sim, sd));
+  // Per-candidate forces (lambda / scale) and states.
+  sd.lambda = sd.result.lam / scale;
+  for (int i = 0; i < sim.numCandidates(); ++i) {
+    sd.candidate_lambda.col(i).setZero();
+    sd.candidate_spring.col(i).setZero();
+    sd.have_candidate_lambda[i] = false;
+    sd.candidate_states[i] = ContactState::kOpen;
+  }
+  row = 0;
+  for (std::size_t blk = 0; blk < sd.active.size(); ++blk) {
+    const int i = sd.active[blk];
+    const int k = sd.candidate_rows[i];
+    if (!exact && k > 1) sd.candidate_spring.col(i) = toSlots(sd.spring_rows.data() + row, k);
+    sd.candidate_lambda.col(i) = toSlots(sd.lambda.data() + row, k);
+    sd.have_candidate_lambda[i] = true;
+    sd.candidate_states[i] = sd.result.states[blk];
+    row += k;
+  }
+  for (std::size_t a = 0; a < sim.anchors.size(); ++a, row += 3)
+    sd.anchor_lambda.col(a) = sd.lambda.segment<3>(row);
+  ++sd.solves;
+  sd.max_residual_step = std::max(sd.max_residual_step, sd.result.residual);
+  sd.all_converged_step = sd.all_converged_step && sd.result.own_converged;
+  sd.iterations_step += sd.result.iterations;
+}
+
+}  // namespace stages
+}  // namespace stiction

@@ -1,0 +1,138 @@
+// The stages of a step (internal to src/cpp/sim/), in the order step() runs them:
+//
+//   1. kinematics   forwardKinematics        kinematics.cpp   placements, J' v, joint Jacobians
+//   2. detect       detectContacts           detect.cpp       gaps, the active set, its rows
+//   3. Jacobians    contactJacobians         kinematics.cpp   J, drift J' v, Psi per row
+//   4. Delassus     freeDynamics             dynamics.cpp     M = U D U^T, nle, tau, M^-1 (tau - nle)
+//                   delassusOperator                          A = J M^-1 J^T (eq. 22)
+//                   rightHandSide                             b (eq. 27)
+//   5. solve        solveContacts            solve.cpp        the formulation's lambda (eq. 65)
+//   6. integrate    integrateTimeStep        integrate.cpp    v+, q+ (eq. 70), or an ODE step of
+//                   integrateRK4, ...                         the relaxed DAI (stages 1-5 per RHS)
+//
+// Timing: the stage functions do not time themselves; where they are sequenced (step(),
+// buildContactProblem, the ODE right-hand side) a Stopwatch charges stages 1-3 to
+// StepTimings::kinematics, 4 to `delassus`, 5 to `solve` and 6 to `integrate`. In the ODE
+// modes stages 1-5 are summed over the RHS evaluations, and `integrate` is the update outside
+// them (RK4: the final combination; adaptive: not timed).
+// Pinocchio's algorithms: crba (dynamics.cpp) is the one slow to compile; the others cost a
+// few seconds a file (their default instantiations are precompiled in libpinocchio).
+// solve.cpp and step.cpp see Pinocchio's Model and Data alone.
+#pragma once
+
+#include <chrono>
+
+#include "stiction/simulator.hpp"
+
+namespace stiction {
+namespace stages {
+
+// ---- stage functions
+
+/// 1. Forward kinematics at (q, v) with zero acceleration (the classical accelerations it
+/// leaves are J' v) and the world-frame joint Jacobians, in sd.data.
+void forwardKinematics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
+                       const Eigen::VectorXd& v);
+
+/// 2. Detection from the placements of stage 1: half-spaces in world coordinates (plane_*),
+/// every candidate's signed distance (gaps; coal pairs fill their slots), and the active
+/// set (active, candidate_rows) of those within the activation distance.
+void detectContacts(const SimulatorModel& sim, SimulatorData& sd);
+
+/// 3. The rows of the active contacts, then of the anchors: J (t1, t2, n per contact),
+/// drift J' v, position_error Psi (gap on normal rows, anchor error), tangent_row.
+void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v);
+
+/// 4a. M (crba; h kd + h^2 kp on its diagonal when implicit_pd_step = h > 0), its factor
+/// M = U D U^T in sd.data, nle, the control torque tau and v_free = M^-1 (tau - nle).
+/// Throws when M is not positive definite.
+void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
+                  const Eigen::VectorXd& v, double implicit_pd_step);
+
+/// 4b. A = J M^-1 J^T (eq. 22) as W^T W, W = D^-1/2 U^-1 J^T: symmetric by construction.
+void delassusOperator(SimulatorData& sd);
+
+/// 4c. b of eq. 27 with Phi = nle - tau: J M^-1 Phi - J' v - (2 zeta / delta) J v - Psi / delta^2;
+/// without the J' v term on tangential rows when tangential_drift is false (time stepping).
+void rightHandSide(SimulatorData& sd, const Eigen::VectorXd& v, double delta, double zeta,
+                   bool tangential_drift = true);
+
+/// 5. Solve eq. 65 for sd.A, sd.b (scaled by `scale`: h for impulses) with the model's
+/// formulation, warm-started from the previous lambda of the same candidates; per-candidate
+/// forces and states. Throws when the problem has no (resolvable) solution.
+void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale);
+
+/// 6. Time stepping (eq. 70): v+ = v + h v_free + M^-1 J^T P (P = h lambda, free flyers'
+/// frame turn), row_velocity = J v+, q+ = integrate(q, h v+); t += h.
+void integrateTimeStep(const SimulatorModel& sim, SimulatorData& sd, double h);
+
+/// 6. The relaxed DAI as an ODE: one classical RK4 step of dt (stages 1-5 per RHS evaluation).
+void integrateRK4(const SimulatorModel& sim, SimulatorData& sd);
+
+/// 6. The relaxed DAI as an ODE: one accepted Bogacki-Shampine 3(2) step of at most dt.
+void integrateAdaptive(const SimulatorModel& sim, SimulatorData& sd);
+
+// ---- timing
+
+using Clock = std::chrono::steady_clock;
+
+inline double microseconds(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::micro>(b - a).count();
+}
+
+/// Charges the time since its start (or its last lap) to a StepTimings field at each lap:
+/// one clock read per group of stages (a read costs ~60 ns on this VM, a small step ~5 us).
+class Stopwatch {
+ public:
+  Stopwatch() : last_(Clock::now()) {}
+  void lap(double& field) {
+    const Clock::time_point now = Clock::now();
+    field += microseconds(last_, now);
+    last_ = now;
+  }
+
+ private:
+  Clock::time_point last_;
+};
+
+// ---- candidates: rows, friction, the 3-slot layout
+
+/// Rows of a contact of model m and friction mu: 1 (n), 2 (t1, n) or 3 (t1, t2, n);
+/// mu = 0 reduces to the unilateral row.
+inline int rowsOf(ContactModel m, double mu) {
+  if (m == ContactModel::kFrictionless || mu == 0.0) return 1;
+  return m == ContactModel::kPlanar ? 2 : 3;
+}
+
+/// Rows of candidate i (a sphere contact or a pair slot).
+inline int candidateRows(const SimulatorModel& sim, int i) {
+  if (sim.slot_pair[i] < 0) return rowsOf(sim.contacts[i].model, sim.contacts[i].mu);
+  const GeometryPairContact& g = sim.pairs[sim.slot_pair[i]];
+  return rowsOf(g.model, g.mu);
+}
+
+/// Friction coefficient of candidate i.
+inline double candidateMu(const SimulatorModel& sim, int i) {
+  return sim.slot_pair[i] < 0 ? sim.contacts[i].mu : sim.pairs[sim.slot_pair[i]].mu;
+}
+
+/// The 3-slot (t1, t2, n) layout from k = 1, 2 or 3 rows.
+inline Eigen::Vector3d toSlots(const double* x, int k) {
+  if (k == 3) return Eigen::Vector3d(x[0], x[1], x[2]);
+  if (k == 2) return Eigen::Vector3d(x[0], 0.0, x[1]);
+  return Eigen::Vector3d(0.0, 0.0, x[0]);
+}
+
+/// k = 1, 2 or 3 rows from the 3-slot (t1, t2, n) layout.
+inline void fromSlots(const Eigen::Vector3d& s, int k, double* x) {
+  if (k == 3) {
+    x[0] = s[0], x[1] = s[1], x[2] = s[2];
+  } else if (k == 2) {
+    x[0] = s[0], x[1] = s[2];
+  } else {
+    x[0] = s[2];
+  }
+}
+
+}  // namespace stages
+}  // namespace stiction

@@ -1,0 +1,142 @@
+// One step: the stages of stages.hpp in order, with the state checks around them.
+#include <algorithm>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+#include "stages.hpp"
+
+namespace stiction {
+
+using namespace stages;
+
+namespace {
+
+// Statistics to zero, the state's size checked, and at a trajectory's start (the first
+// step, or after q, v or t were assigned) the blow-up check's reference.
+bool beginStep(const SimulatorModel& sim, SimulatorData& sd) {
+  sd.timings = StepTimings{};
+  sd.rhs_evaluations = 0;
+  sd.solves = 0;
+  sd.iterations_step = 0;
+  sd.max_residual_step = 0.0;
+  sd.all_converged_step = true;
+  if (sd.q.size() != sim.model.nq || sd.v.size() != sim.model.nv)
+    throw std::invalid_argument("state size: q needs nq = " + std::to_string(sim.model.nq) +
+                                " entries and v nv = " + std::to_string(sim.model.nv));
+  const bool first = sd.reference_speed < 0.0;
+  if (first) {
+    sd.reference_speed = sim.model.nv > 0 ? sd.v.cwiseAbs().maxCoeff() : 0.0;
+    sd.reference_time = sd.t;
+    sd.reference_penetration = 0.0;
+  }
+  return first;
+}
+
+void checkState(const SimulatorData& sd) {
+  if (!sd.q.allFinite() || !sd.v.allFinite()) {
+    std::ostringstream os;
+    os << "simulation diverged: non-finite state at t = " << sd.t;
+    throw std::runtime_error(os.str());
+  }
+}
+
+// Physically absurd states, relative to the scene: a speed far above what gravity
+// could have given since the start (10 (|v_0| + |g| t) + 50, m/s or rad/s), or a
+// contact sinking far deeper than the activation distance and its initial depth.
+// An explicit integrator past its stability bound, or forces out of control, end here.
+void checkBlowUp(const SimulatorModel& sim, const SimulatorData& sd) {
+  const pinocchio::Model& model = sim.model;
+  const double g = model.gravity.linear().norm();
+  const double speed_limit = 10.0 * (sd.reference_speed + g * std::max(0.0, sd.t - sd.reference_time)) + 50.0;
+  Eigen::Index k = 0;
+  const double speed = model.nv > 0 ? sd.v.cwiseAbs().maxCoeff(&k) : 0.0;
+  const char* hint = sim.settings.mode == IntegrationMode::kTimeStepping
+                         ? ""
+                         : " (ODE mode: is dt small enough for delta? see rk4StableStep)";
+  if (speed > speed_limit) {
+    std::string joint = "?";
+    for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+      if (k >= model.idx_vs[j] && k < model.idx_vs[j] + model.nvs[j]) joint = model.names[j];
+    std::ostringstream os;
+    os << "simulation diverged (blow-up) at t = " << sd.t << ": velocity coordinate " << k << " (joint '" << joint
+       << "') reached " << speed << ", above the bound 10 (|v0| + |g| t) + 50 = " << speed_limit << hint;
+    throw std::runtime_error(os.str());
+  }
+  const double depth_limit =
+      std::max(0.1, 10.0 * sim.settings.activation_distance) + 10.0 * sd.reference_penetration;
+  for (int i : sd.active) {
+    if (-sd.gaps[i] > depth_limit) {
+      const std::string name = sim.slot_pair[i] < 0 ? sim.contacts[i].name : sim.pairs[sim.slot_pair[i]].name;
+      std::ostringstream os;
+      os << "simulation diverged (blow-up) at t = " << sd.t << ": contact '" << name << "' penetrates " << -sd.gaps[i]
+         << " m, deeper than the bound " << depth_limit << " m" << hint;
+      throw std::runtime_error(os.str());
+    }
+  }
+}
+
+// The new state finite and not blown up; then the post-step contact velocities J v
+// (rows t1, t2, n) per active candidate, with the last Jacobian (time stepping:
+// exactly the velocity the solve imposed).
+void endStep(const SimulatorModel& sim, SimulatorData& sd, bool first) {
+  checkState(sd);
+  if (first)
+    for (int i : sd.active) sd.reference_penetration = std::max(sd.reference_penetration, -sd.gaps[i]);
+  checkBlowUp(sim, sd);
+  sd.candidate_velocity.setZero();
+  if (sd.J.rows() > 0) {
+    if (sim.settings.mode != IntegrationMode::kTimeStepping) sd.row_velocity.noalias() = sd.J * sd.v;
+    Eigen::Index row = 0;
+    for (int i : sd.active) {
+      sd.candidate_velocity.col(i) = toSlots(sd.row_velocity.data() + row, sd.candidate_rows[i]);
+      row += sd.candidate_rows[i];
+    }
+  }
+}
+
+}  // namespace
+
+void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
+                         const Eigen::VectorXd& v, double delta, double zeta, double implicit_pd_step) {
+  Stopwatch watch;
+  forwardKinematics(sim, sd, q, v);
+  detectContacts(sim, sd);
+  contactJacobians(sim, sd, v);
+  watch.lap(sd.timings.kinematics);
+  freeDynamics(sim, sd, q, v, implicit_pd_step);
+  delassusOperator(sd);
+  rightHandSide(sd, v, delta, zeta);
+  watch.lap(sd.timings.delassus);
+}
+
+void step(const SimulatorModel& sim, SimulatorData& sd) {
+  const auto start = Clock::now();
+  const bool first = beginStep(sim, sd);  // statistics to zero, state size, blow-up reference
+  switch (sim.settings.mode) {
+    case IntegrationMode::kTimeStepping: {  // eq. 70: delta = h, zeta = 1/2, impulses P = h lambda
+      const double h = sim.settings.dt;
+      Stopwatch watch;
+      forwardKinematics(sim, sd, sd.q, sd.v);  // placements, J' v, joint Jacobians
+      detectContacts(sim, sd);                 // gaps, the active set
+      contactJacobians(sim, sd, sd.v);         // J, drift J' v, Psi
+      watch.lap(sd.timings.kinematics);
+      freeDynamics(sim, sd, sd.q, sd.v, sim.settings.implicit_pd ? h : 0.0);  // M = U D U^T, M^-1 (tau - nle)
+      delassusOperator(sd);                                                    // A = J M^-1 J^T
+      rightHandSide(sd, sd.v, h, 0.5, /*tangential_drift=*/false);             // b (eq. 27)
+      watch.lap(sd.timings.delassus);
+      solveContacts(sim, sd, h);  // A P - h b in -N(P), by the formulation
+      watch.lap(sd.timings.solve);
+      integrateTimeStep(sim, sd, h);  // v+, then q+
+      watch.lap(sd.timings.integrate);
+      break;
+    }
+    // The relaxed DAI as an ODE: buildContactProblem and solveContacts at every RHS evaluation.
+    case IntegrationMode::kRK4: integrateRK4(sim, sd); break;
+    case IntegrationMode::kAdaptive: integrateAdaptive(sim, sd); break;
+  }
+  endStep(sim, sd, first);  // finite, not blown up; contact velocities J v
+  sd.timings.total = microseconds(start, Clock::now());
+}
+
+}  // namespace stiction
