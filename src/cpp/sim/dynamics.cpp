@@ -1,6 +1,5 @@
 // Stage 4, the Delassus stage: the mass matrix and its factor, the free acceleration,
 // then the contact problem's A = J M^-1 J^T (eq. 22) and b (eq. 27).
-// The one translation unit that instantiates crba (about 45 s to compile).
 #include <stdexcept>
 #include <string>
 
@@ -60,7 +59,9 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
                   const Eigen::VectorXd& v, double implicit_pd_step) {
   const pinocchio::Model& model = sim.model;
   pinocchio::Data& data = sd.data;
-  pinocchio::crba(model, data, q, pinocchio::Convention::LOCAL);
+  // q as Eigen::Ref: the instantiation libpinocchio ships (extern template), not a fresh one
+  // here (a VectorXd argument made this file take 55 s to compile instead of 14 s).
+  pinocchio::crba(model, data, Eigen::Ref<const Eigen::VectorXd>(q), pinocchio::Convention::LOCAL);
   if (implicit_pd_step > 0.0) {
     // Implicit joint PD over a step h: tau(q+, v+) ~ kp (q_t - q - h v+) + kd (v_t - v+)
     // moves h kd + h^2 kp onto M's diagonal (stable for any gains; MuJoCo's implicitfast

@@ -15,9 +15,10 @@
 // StepTimings::kinematics, 4 to `delassus`, 5 to `solve` and 6 to `integrate`. In the ODE
 // modes stages 1-5 are summed over the RHS evaluations, and `integrate` is the update outside
 // them (RK4: the final combination; adaptive: not timed).
-// Pinocchio's algorithms: crba (dynamics.cpp) is the one slow to compile; the others cost a
-// few seconds a file (their default instantiations are precompiled in libpinocchio).
-// solve.cpp and step.cpp see Pinocchio's Model and Data alone.
+// Pinocchio's algorithms cost a few seconds of compilation a file when called with the
+// argument types of the instantiations libpinocchio ships (extern templates: VectorXd, or
+// Eigen::Ref<const VectorXd> for crba); other argument types instantiate them anew (crba:
+// +40 s). solve.cpp and step.cpp see Pinocchio's Model and Data alone.
 #pragma once
 
 #include <chrono>
