@@ -184,7 +184,10 @@ def test_time_limit_covers_proxqp(limit):
     assert wall < 3 * limit + 1.0, (wall, [(st.name, st.seconds) for st in r.stages])
     assert not r.converged
     assert r.stages[0].name == "proxqp (warm start)" and r.stages[0].outcome == "time limit reached"
-    assert r.warm_start_seconds == r.stages[0].seconds > 0
+    # warm_start_seconds is ProxQP's time wherever it ran: the warm start, and any ProxQP stage the
+    # default pipeline runs with what is left of the limit (under load it may get a few ms)
+    proxqp = [st.seconds for st in r.stages if st.name.startswith("proxqp")]
+    assert r.warm_start_seconds == pytest.approx(sum(proxqp), rel=1e-12) and r.stages[0].seconds > 0
 
 
 @pytest.mark.parametrize("solver", SOLVERS)

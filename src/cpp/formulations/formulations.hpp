@@ -2,6 +2,8 @@
 // (formulation.cpp) maps names to them.
 #pragma once
 
+#include <chrono>
+#include <cmath>
 #include <memory>
 #include <string>
 
@@ -15,5 +17,38 @@ std::unique_ptr<Formulation> makePyramidFormulation();   // pyramid.cpp
 std::unique_ptr<Formulation> makePenaltyFormulation();   // penalty.cpp
 /// method "admm" or "pgs"; ncp: with De Saxce's correction (Pinocchio's solve_ncp), else its CCP.
 std::unique_ptr<Formulation> makePinocchioFormulation(const std::string& method, bool ncp);  // pinocchio_solvers.cpp
+
+/// The sweep loop of the Gauss-Seidel formulations (nakaoka, penalty): sweep() once, then
+/// residual() (the formulation's own measure), until it is <= settings.tolerance, non-finite, the
+/// iteration budget or the time limit; sets result.iterations, message, own_residual, own_converged.
+template <class Sweep, class Residual>
+void sweepUntilConverged(const SolverSettings& settings, SolverResult& result, Sweep sweep, Residual residual,
+                         const char* nonfinite_message) {
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  result.message = "iteration limit reached";
+  int done = 0;
+  while (done < settings.max_iterations) {
+    sweep();
+    ++done;
+    result.own_residual = residual();
+    if (!std::isfinite(result.own_residual)) {
+      result.message = nonfinite_message;
+      break;
+    }
+    if (result.own_residual <= settings.tolerance) {
+      result.message = "converged";
+      break;
+    }
+    if (settings.time_limit > 0.0 &&
+        std::chrono::duration<double>(Clock::now() - start).count() > settings.time_limit) {
+      result.message = "time limit reached";
+      break;
+    }
+  }
+  if (done == 0) result.own_residual = residual();
+  result.iterations = done;
+  result.own_converged = result.own_residual <= settings.tolerance;
+}
 
 }  // namespace stiction

@@ -60,8 +60,6 @@ class NakaokaFormulation final : public Formulation {
   std::string equations() const override { return "80-81"; }
 
   void iterate(const ContactProblem& problem, const SolverSettings& settings, SolverResult& result) override {
-    using Clock = std::chrono::steady_clock;
-    const auto start = Clock::now();
     const auto& cons = problem.constraints();
     const auto& off = problem.offsets();
     const Eigen::Index m = problem.numRows();
@@ -81,9 +79,7 @@ class NakaokaFormulation final : public Formulation {
     Eigen::VectorXd& lam = result.lam;
     u_.resize(m);
     y_.resize(m);
-    result.message = "iteration limit reached";
-    int sweep = 0;
-    for (; sweep < settings.max_iterations; ++sweep) {
+    auto sweep = [&]() {
       for (std::size_t i = 0; i < cons.size(); ++i) {
         const int k = cons[i].size;
         const Eigen::Index o = off[i];
@@ -97,27 +93,9 @@ class NakaokaFormulation final : public Formulation {
         projectSingularMetric(cons[i], yi);
         li = yi;
       }
-      result.own_residual = fixedPointResidual(problem, A, lam);
-      if (!std::isfinite(result.own_residual)) {
-        result.message = "diverged (non-finite lambda)";
-        ++sweep;
-        break;
-      }
-      if (result.own_residual <= settings.tolerance) {
-        result.message = "converged";
-        ++sweep;
-        break;
-      }
-      if (settings.time_limit > 0.0 &&
-          std::chrono::duration<double>(Clock::now() - start).count() > settings.time_limit) {
-        result.message = "time limit reached";
-        ++sweep;
-        break;
-      }
-    }
-    if (settings.max_iterations == 0) result.own_residual = fixedPointResidual(problem, A, lam);
-    result.iterations = sweep;
-    result.own_converged = result.own_residual <= settings.tolerance;
+    };
+    sweepUntilConverged(settings, result, sweep, [&]() { return fixedPointResidual(problem, A, lam); },
+                        "diverged (non-finite lambda)");
     result.own_law = "Nakaoka fixed point (eq. 80, per block): ||lambda - P^U(lambda - D^+ u)|| / ||lambda||";
   }
 

@@ -68,8 +68,6 @@ class PenaltyFormulation final : public Formulation {
   std::string equations() const override { return "83-84"; }
 
   void iterate(const ContactProblem& problem, const SolverSettings& settings, SolverResult& result) override {
-    using Clock = std::chrono::steady_clock;
-    const auto start = Clock::now();
     const auto& cons = problem.constraints();
     const auto& off = problem.offsets();
     const Eigen::Index m = problem.numRows();
@@ -97,31 +95,12 @@ class PenaltyFormulation final : public Formulation {
 
     Eigen::VectorXd& P = result.lam;
     u_.resize(m);
-    result.message = "iteration limit reached";
-    int sweep = 0;
-    for (; sweep < settings.max_iterations; ++sweep) {
-      for (std::size_t i = 0; i < cons.size(); ++i) localSolve(problem, A, c, static_cast<int>(i), P);
-      result.own_residual = lawResidual(problem, A, c, P);
-      if (!std::isfinite(result.own_residual)) {
-        result.message = "diverged (non-finite impulse)";
-        ++sweep;
-        break;
-      }
-      if (result.own_residual <= settings.tolerance) {
-        result.message = "converged";
-        ++sweep;
-        break;
-      }
-      if (settings.time_limit > 0.0 &&
-          std::chrono::duration<double>(Clock::now() - start).count() > settings.time_limit) {
-        result.message = "time limit reached";
-        ++sweep;
-        break;
-      }
-    }
-    if (settings.max_iterations == 0) result.own_residual = lawResidual(problem, A, c, P);
-    result.iterations = sweep;
-    result.own_converged = result.own_residual <= settings.tolerance;
+    sweepUntilConverged(
+        settings, result,
+        [&]() {
+          for (std::size_t i = 0; i < cons.size(); ++i) localSolve(problem, A, c, static_cast<int>(i), P);
+        },
+        [&]() { return lawResidual(problem, A, c, P); }, "diverged (non-finite impulse)");
     // The step is taken: the tangential springs move (implicit Euler of eq. 83).
     if (context_.state != nullptr) {
       Eigen::VectorXd& e = *context_.state;
