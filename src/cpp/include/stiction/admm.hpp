@@ -10,7 +10,14 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
+#include <Eigen/OrderingMethods>
 #include <Eigen/SparseCholesky>
+#include <Eigen/SparseCore>
+#include <Eigen/SparseLU>
+
+#include <deque>
+#include <utility>
+#include <vector>
 
 #include "stiction/solver.hpp"
 
@@ -24,29 +31,49 @@ class AdmmSolver final : public ContactSolver {
 
   /// ADMM iterations from lam (or, with resume, from the state the previous call
   /// left: z, y, rho and the factorization). Writes the feasible iterate z into
-  /// lam; returns the number of iterations.
+  /// lam; returns the number of iterations. With switch_after > 0, stops with message
+  /// "stalled" when the best residual's rate over the last 400 iterations predicts more
+  /// than switch_after further iterations (or it did not improve).
   int run(const ContactProblem& problem, Eigen::VectorXd& lam, int max_iterations, double tolerance,
-          double time_limit, double initial_rho, bool resume, std::string& message);
+          double time_limit, double initial_rho, bool resume, std::string& message,
+          double switch_after = 0.0);
+
+  /// True when run() factorizes and multiplies A sparsely: A held sparse (SparseDelassus), or
+  /// more than 64 rows and at most 10 % nonzero entries (the FCLib problems of that size are
+  /// 0.6-4 % nonzero).
+  static bool factorsSparsely(const ContactProblem& problem);
 
   /// false: drop the De Saxce term, i.e. solve the convex CCP relaxation (eq. 78-79) and
   /// stop on its natural map (coneNaturalMap) instead of the exact law's.
   void setDesaxce(bool on) { desaxce_ = on; }
 
  private:
+  void prepareSparse(const ContactProblem& problem);
   void factorize(const ContactProblem& problem, double shift);
-  void solveShifted(Eigen::VectorXd& x) const;
+  void solveShifted(Eigen::VectorXd& x);
+  void multiplyA(const ContactProblem& problem, const Eigen::VectorXd& x, Eigen::VectorXd& y) const;
+  double largestEigenvalueEstimate(const ContactProblem& problem, int iterations);
 
   bool desaxce_ = true;
   bool symmetric_ = true;
   double L_ = 0.0, prox_ = 0.0, rho_ = 0.0;
   int since_rho_change_ = 0;
+  double imbalance_ = 10.0;    // primal/dual residual ratio that moves rho (large m: grows on reversals)
+  double last_factor_ = 1.0;   // the last change of rho (its direction)
+  double best_r_ = 0.0;        // best relative residual at z so far (the stall test's)
+  std::deque<std::pair<int, double>> window_;  // (iteration, best_r_) over the stall window
+  int total_iterations_ = 0;   // over resumed runs
   Eigen::VectorXd primal_;  // the unprojected iterate x
   Eigen::MatrixXd shifted_;
   Eigen::LLT<Eigen::MatrixXd> llt_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
-  bool sparse_ = false;  // factorized sparsely (a sparse A)
-  Eigen::SimplicialLLT<Eigen::SparseMatrix<double>> sparse_llt_;
-  Eigen::VectorXd z_, z_prev_, y_, u_, ulam_, rhs_;
+  // A sparse A (held sparse, or large and <= 10 % nonzero): factorized sparsely (admm.cpp).
+  bool sparse_ = false, sparse_lu_analyzed_ = false;
+  Eigen::SparseMatrix<double> sparse_A_, sparse_shifted_;
+  std::vector<Eigen::Index> diagonal_;  // positions of the diagonal in sparse_shifted_'s values
+  Eigen::SimplicialLLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::AMDOrdering<int>> sparse_llt_;
+  Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> sparse_lu_;
+  Eigen::VectorXd z_, z_prev_, y_, u_, ulam_, rhs_, work_;
 };
 
 /// Largest eigenvalue of the symmetric part of A by power iteration (an estimate).
