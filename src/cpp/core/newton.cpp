@@ -264,6 +264,8 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
   // A stage found lambda where the tolerance cannot be verified in double
   // precision: no other stage will do better at that scale; the verdict says so.
   auto unresolvable = [&](const std::string& stage_msg) { return stage_msg == kUnresolvableMessage; };
+  bool admm_started = false, use_admm = false;
+  Eigen::VectorXd admm_state;
   if (problem.numRows() <= kNewtonFirstRows) {
     // 1a. Small problems (a robot's feet, a box's corners): a dense Newton step
     //     costs less than a few Gauss-Seidel sweeps and converges in a handful.
@@ -288,21 +290,84 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
       }
     }
   } else {
-    // 1b. Large problems: NSGS while it makes progress (a sweep costs one product
-    //     with A), then Newton from the NSGS iterate where Gauss-Seidel crawls.
-    const auto t0 = Clock::now();
-    const int sweeps = nsgs_.sweep(problem, lam, budget, tol, switch_after, remaining(), msg);
-    used += sweeps;
-    record("nsgs", sweeps, t0, msg);
-    if (msg != "stalled") return finish(msg == "converged" ? msg : msg + " (nsgs)");
-    keep_best(lam, "nsgs");
-    if (newton_from_here(50, "newton")) return finish("converged (nsgs, newton)");
-    if (unresolvable(newton_msg)) return finish(newton_msg + " (newton)");
-    // Newton from the initial guess: on some problems the NSGS iterate sits in
+    // ADMM from the initial guess until it converges or its best residual stops improving
+    // (its stall test: no progress over 400 iterations, or a rate that needs more than 10 m
+    // further ones), then a few Newton steps from the best iterate met if it is nearly there
+    // (on the degenerate Capsules, Newton from a near-solution point only takes tiny steps,
+    // so no more than a few). True when the solve is finished.
+    auto admm_then_polish = [&](const char* converged_how) {
+      const auto t1 = Clock::now();
+      lam = initial_;
+      const int done = admm_.run(problem, lam, budget - used, tol, remaining(), 0.0, false, msg,
+                                 kAdmmHorizonPerRow * m);
+      admm_started = true;
+      admm_state = lam;
+      used += done;
+      record("admm", done, t1, msg);
+      if (msg == "converged") {
+        finish(converged_how);
+        return true;
+      }
+      if (unresolvable(msg)) {
+        finish(msg + " (admm)");
+        return true;
+      }
+      keep_best(lam, "admm");
+      // Only an iterate that is nearly there (within 1000 x the tolerance) is worth a few
+      // Newton steps: from SpheresBox's (relative residual ~0.2) 5 steps cost 0.17 s for
+      // nothing; and from the initial guess, Newton comes next anyway.
+      if (best_stage == "initial guess" || best_res > kPolishWithin * tol * stoppingScale(problem))
+        return false;
+      lam = best_;
+      if (newton_from_here(kPolishSteps, "newton (from the best iterate)")) {
+        finish("converged (admm, newton)");
+        return true;
+      }
+      if (unresolvable(newton_msg)) {
+        finish(newton_msg + " (newton)");
+        return true;
+      }
+      return false;
+    };
+    const bool large = problem.numRows() > kAdmmAboveRows;
+    if (large && AdmmSolver::factorsSparsely(problem)) {
+      // 1b. Large sparse problems: ADMM alone, no Gauss-Seidel prelude. With A <= 10 %
+      //     nonzero ADMM factorizes and solves sparsely (admm.cpp): on the FCLib problems of
+      //     this kind (648-1710 rows, 0.6-4 % nonzero) it reaches 1e-8 in 20-130 ms where the
+      //     NSGS prelude alone cost 10-100 ms and NSGS then Newton 0.15-4 s (Spheres: ADMM 20
+      //     ms, NSGS 65 ms; KaplasTower: ADMM 0.08-0.13 s, NSGS 1.5 s; docs/solvers.md, "The
+      //     default's rule").
+      if (admm_then_polish("converged (admm)")) return;
+    } else {
+      // 1c. Medium problems, and large dense ones: NSGS while it makes progress (a sweep
+      //     costs one product with A), until its rate or its deceleration says it stalls.
+      const auto t0 = Clock::now();
+      const int sweeps = nsgs_.sweep(problem, lam, budget, tol, switch_after, remaining(), msg);
+      used += sweeps;
+      record("nsgs", sweeps, t0, msg);
+      if (msg != "stalled") return finish(msg == "converged" ? msg : msg + " (nsgs)");
+      keep_best(lam, "nsgs");
+      if (large && used < budget && !out_of_time()) {
+        // Large dense problems: ADMM, not Newton (a dense LU of > 384 rows per step; with
+        // dense factorizations ADMM took 0.15-0.6 s on the Capsules, NSGS then Newton
+        // 0.15-8 s). From the initial guess, not the NSGS iterate: from there ADMM took 36
+        // iterations instead of 12 on KaplasTower and crawled at 2e-8 for 400 iterations
+        // on Capsules-i122 and -i101 (measured).
+        if (admm_then_polish("converged (nsgs, admm)")) return;
+      } else {
+        // Medium problems (65-384 rows): Newton from the NSGS iterate; a dense step
+        // costs a few ms (BoxesStack, OneObject, PerioBox, Confeti-ex13: 0.5-18 ms in all,
+        // where ADMM took 4-80 ms).
+        if (newton_from_here(50, "newton")) return finish("converged (nsgs, newton)");
+        if (unresolvable(newton_msg)) return finish(newton_msg + " (newton)");
+      }
+    }
+    // Newton from the initial guess: on some problems the NSGS or ADMM iterate sits in
     // a region where the line search stalls and the guess does not (SpheresBox).
     if (!out_of_time()) {
       lam = initial_;
-      if (newton_from_here(50, "newton (from the initial guess)")) return finish("converged (nsgs, newton)");
+      if (newton_from_here(50, "newton (from the initial guess)"))
+        return finish("converged (newton from the initial guess)");
       if (unresolvable(newton_msg)) return finish(newton_msg + " (newton)");
     }
   }
@@ -316,8 +381,8 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
   // 3. Alternate chunks of NSGS and of ADMM (never diverges, handles rank
   //    deficiency; its state carries over between its chunks), each followed by
   //    a Newton attempt from the chunk's iterate, until the budget is spent.
-  bool admm_started = false, use_admm = false;
-  Eigen::VectorXd admm_state = best_;
+  use_admm = false;
+  if (!admm_started) admm_state = best_;
   std::string last = result.stages.empty() ? "the start" : result.stages.back().name;
   while (used < budget && !out_of_time()) {
     const int chunk = std::min(500, budget - used);

@@ -37,18 +37,35 @@ class NewtonSolver final : public ContactSolver {
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
 };
 
-/// The default. Small problems (<= kNewtonFirstRows rows): Newton first, then
-/// Newton from ProxQP's facetized-cone solution if that failed. Larger
-/// ones: NSGS while its rate promises to finish sooner than ~10 Newton steps
-/// (cheap sweeps, exact local solves), then Newton from the NSGS iterate and
-/// from the initial guess. If Newton's line search cannot finish:
-/// alternating chunks of NSGS and ADMM (500 iterations at most), each followed
-/// by a Newton attempt from its iterate. Returns the best iterate met.
+/// The default: picks its stages by size and sparsity, and within those by how the stages
+/// converge (measured on the 36 FCLib problems and the simulator's scenes: docs/solvers.md,
+/// "The default's rule").
+/// - Small problems (<= kNewtonFirstRows rows: a robot's feet, a box's corners): Newton
+///   first, then Newton from ProxQP's facetized-cone solution if that failed.
+/// - Large sparse problems (> kAdmmAboveRows rows, <= 10 % nonzero): ADMM (sparse
+///   factorization) until it converges or its best residual stops improving, then a few
+///   Newton steps from the best iterate if it is nearly there.
+/// - Otherwise NSGS while its rate promises to finish within ~m/2 sweeps and does not
+///   decelerate; then Newton from the NSGS iterate (medium problems, <= kAdmmAboveRows rows)
+///   or ADMM as above (large dense ones).
+/// - Then Newton from the initial guess; if all that fails, alternating chunks of NSGS and
+///   ADMM (500 iterations at most), each followed by a Newton attempt from its iterate.
+///   Returns the best iterate met.
 class DefaultSolver final : public ContactSolver {
  public:
   /// Up to this many rows a dense Newton step is cheaper than a few sweeps
   /// (measured: docs/solvers.md).
   static constexpr Eigen::Index kNewtonFirstRows = 64;
+  /// Above this many rows ADMM, not Newton, follows a stalled NSGS, and a sparse A goes to
+  /// ADMM directly: the FCLib problems where Newton wins have <= 321 rows, those where ADMM
+  /// wins >= 648 (docs/solvers.md).
+  static constexpr Eigen::Index kAdmmAboveRows = 384;
+  /// ADMM's stall horizon, in iterations per row (admm.hpp: switch_after).
+  static constexpr double kAdmmHorizonPerRow = 10.0;
+  /// Newton steps from the best iterate after ADMM stalls, if its residual is within
+  /// kPolishWithin x the tolerance.
+  static constexpr int kPolishSteps = 5;
+  static constexpr double kPolishWithin = 1e3;
 
   std::string name() const override { return "default"; }
   void iterate(const ContactProblem& problem, const SolverSettings& settings,

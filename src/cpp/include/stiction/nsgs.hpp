@@ -20,7 +20,9 @@ class NsgsSolver final : public ContactSolver {
   /// Sweep at most `max_sweeps` times, or until the relative residual is below
   /// `tolerance`, or (if switch_after > 0) until the convergence rate of the last
   /// 10 sweeps predicts more than `switch_after` further sweeps to reach the
-  /// tolerance (message "stalled": time for another method). Returns the sweeps done.
+  /// tolerance, or the predicted finishing sweep has moved 1.5x later than its earliest
+  /// value (a decelerating rate) (message "stalled": time for another method). Returns
+  /// the sweeps done.
   int sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int max_sweeps, double tolerance,
             double switch_after, double time_limit, std::string& message);
 

@@ -1,0 +1,136 @@
+"""The default solver's rule (docs/solvers.md, "The default's rule"): which stages it runs, by
+size and sparsity and by how the stages converge. No timings here: the stages, their counts and
+outcomes are what the measured speed-ups rest on, and they are deterministic."""
+import numpy as np
+import pytest
+
+import stiction
+from stiction import fclib
+
+from conftest import FCLIB_DIR, FCLIB_FILES, spd
+
+CAPSULES = [n for n in FCLIB_FILES if n.startswith("Capsules--")]
+KAPLAS = "KaplasTower--KaplasTower-i1061-4.hdf5.dat"
+SPHERES = "Spheres--Spheres-i099-356-679.hdf5"
+
+
+def solve(name, tol=1e-8, symmetrised=False):
+    P = fclib.load(FCLIB_DIR / name)
+    if symmetrised:
+        problem = stiction.spatial_problem(0.5 * (P.A + P.A.T), P.b, P.mu)
+    else:
+        problem = P.problem()
+    return problem, stiction.solve(problem, tol=tol, max_iter=5000, time_limit=60.0)
+
+
+def stage_names(result):
+    return [s.name for s in result.stages]
+
+
+def density(problem):
+    A = np.asarray(problem.A)
+    return np.count_nonzero(A) / A.size
+
+
+def test_the_bundled_set_has_the_problems_the_rule_was_measured_on():
+    assert len(CAPSULES) == 5 and KAPLAS in FCLIB_FILES and SPHERES in FCLIB_FILES
+
+
+@pytest.mark.parametrize("symmetrised", [False, True], ids=["stored", "symmetrised"])
+@pytest.mark.parametrize("name", CAPSULES + [KAPLAS, SPHERES])
+def test_large_sparse_problems_go_to_admm_without_a_gauss_seidel_prelude(name, symmetrised):
+    """Capsules (648-888 rows), KaplasTower (1710) and Spheres (1068), 0.6-4 % nonzero: before,
+    an NSGS prelude handed over to Newton (23-50 dense LU steps, then again from the initial
+    guess) or ran 1056 sweeps (KaplasTower); now ADMM, factorized sparsely, solves them alone."""
+    problem, r = solve(name, symmetrised=symmetrised)
+    assert problem.num_rows > 384 and density(problem) <= 0.1
+    assert r.converged and r.relative_residual <= 1e-8, r.message
+    assert stage_names(r) == ["admm"], r.stages
+    assert r.stages[0].outcome == "converged" and r.message == "converged (admm)"
+
+
+def test_admm_hands_over_to_newton_when_its_best_residual_stops_improving():
+    """SpheresBox (768 rows, cond ~1e9): ADMM stays near its starting residual; its stall test
+    stops it after the 400-iteration window and Newton from the initial guess solves it."""
+    _, r = solve("SpheresBox--spheres-in-a-box-98-i10000-256-10.hdf5")
+    assert r.converged and r.relative_residual <= 1e-8
+    names = stage_names(r)
+    assert names[0] == "admm" and names[-1] == "newton (from the initial guess)", r.stages
+    assert r.stages[0].outcome == "stalled" and r.stages[0].iterations <= 500
+    assert r.stages[-1].outcome == "converged"
+
+
+@pytest.mark.parametrize("name", ["BoxesStack--BoxesStack1-i100000-32.hdf5.dat",
+                                  "Confeti--Confeti-ex13-Fc3D-SBM.dat",
+                                  "OneObject--OneObject-i100000-316.hdf5.dat",
+                                  "PerioBox--LMGC_100_PR_PerioBox-i00361-60-03000.hdf5"])
+def test_medium_problems_hand_a_stalled_gauss_seidel_to_newton(name):
+    """65-384 rows: a dense Newton step costs a few ms, and Newton from the NSGS iterate
+    finishes in 4-17 steps where ADMM needs hundreds of iterations or stalls."""
+    problem, r = solve(name)
+    assert 64 < problem.num_rows <= 384
+    assert r.converged and stage_names(r) == ["nsgs", "newton"], r.stages
+    assert r.stages[0].outcome == "stalled"
+
+
+@pytest.mark.parametrize("name", ["BoxStacks--Box_Stacks-i0122-82-5.hdf5", "NESpheres--NESpheres_30_1.dat"])
+def test_medium_well_conditioned_problems_are_solved_by_gauss_seidel_alone(name):
+    _, r = solve(name)
+    assert r.converged and stage_names(r) == ["nsgs"], r.stages
+
+
+@pytest.mark.parametrize("name", [n for n in FCLIB_FILES if n.startswith(("Rover--", "Toy--"))])
+def test_small_problems_start_with_newton(name):
+    problem, r = solve(name)
+    assert problem.num_rows <= 64
+    assert r.converged and stage_names(r) == ["newton"], r.stages
+
+
+def test_a_large_dense_problem_keeps_the_gauss_seidel_prelude(rng):
+    """Above 384 rows but dense (more than 10 % nonzero): NSGS first, as before the rule."""
+    nc = 140
+    A = spd(rng, 3 * nc, cond=50.0)
+    b = rng.standard_normal(3 * nc)
+    problem = stiction.spatial_problem(A, b, 0.5)
+    assert density(problem) > 0.1
+    r = stiction.solve(problem, tol=1e-8, max_iter=5000)
+    assert r.converged and stage_names(r)[0] == "nsgs", r.stages
+
+
+def block_sparse_problem(rng, groups, contacts_per_group, asymmetry=0.0):
+    """A block-diagonal Delassus operator: `groups` independent bodies with a few contacts each."""
+    k = 3 * contacts_per_group
+    m = groups * k
+    A = np.zeros((m, m))
+    for g in range(groups):
+        A[g * k:(g + 1) * k, g * k:(g + 1) * k] = spd(rng, k, cond=20.0)
+    if asymmetry:
+        skew = rng.standard_normal((m, m)) * (A != 0)
+        A = A + asymmetry * np.abs(A).max() * (skew - skew.T) / 2
+    b = rng.standard_normal(m)
+    b[2::3] = np.abs(b[2::3]) + 0.5  # push every contact closed
+    return stiction.spatial_problem(A, b, 0.6, asymmetry_tolerance=max(1e-9, 10 * asymmetry))
+
+
+@pytest.mark.parametrize("asymmetry", [0.0, 1e-6], ids=["symmetric (sparse Cholesky)", "asymmetric (sparse LU)"])
+def test_admm_on_a_sparse_operator_solves_as_the_dense_solvers_do(rng, asymmetry):
+    """ADMM factorizes a sparse A (> 64 rows, <= 10 % nonzero) sparsely: same answers as Newton
+    (dense LU) on a block-diagonal problem, symmetric or slightly not."""
+    problem = block_sparse_problem(rng, groups=20, contacts_per_group=2, asymmetry=asymmetry)
+    assert problem.num_rows == 120 and density(problem) <= 0.1
+    admm = stiction.solve(problem, solver="admm", tol=1e-10, max_iter=20000)
+    newton = stiction.solve(problem, solver="newton", tol=1e-12)
+    assert admm.converged and newton.converged, (admm.message, newton.message)
+    np.testing.assert_allclose(admm.lam, newton.lam, atol=1e-7 * np.abs(newton.lam).max())
+
+
+def test_a_warm_started_robot_step_is_one_newton_stage():
+    """The simulator's per-step problem (a few contacts, warm-started from the previous step):
+    the small-problem path, untouched by the rule for larger problems."""
+    from stiction.problems import cube_on_ground
+
+    problem = cube_on_ground(mu=0.3).problem
+    first = stiction.solve(problem)
+    again = stiction.solve(problem, warm_start=first.lam)
+    assert again.converged and stage_names(again) == ["newton"] and again.iterations <= 1
+    np.testing.assert_allclose(again.lam, first.lam, atol=1e-12 * np.abs(first.lam).max())
