@@ -5,14 +5,16 @@ or several builds of stiction — the measurements behind the default solver's r
 "The default's rule").
 
     python benchmarks/bench_default.py [--filter SUBSTR,...] [--rounds 3] [--json FILE] [--out FILE]
-        [--build NAME=PYTHONPATH ...] [--solvers default,admm,newton,nsgs] [--no-pinocchio]
+        [--build NAME=PYTHONPATH ...] [--solvers default,admm,newton,nsgs] [--warm-start]
+        [--no-pinocchio]
 
 Every measurement runs in a fresh worker process (`--worker`), so builds can be compared in one
 run: `--build before=/path/to/old/src --build after=src` alternates the builds problem by
 problem, round by round (the machine is shared and noisy; alternating spreads its load over
 both), and reports the median over rounds of each run's median. Without --build the
 interpreter's own stiction is the only build. The first build's first round runs every solver
-(and Pinocchio on the symmetrised matrix); later rounds and other builds run the default and ADMM.
+(and Pinocchio on the symmetrised matrix; with --warm-start every solver again from ProxQP's
+facetized-cone solution, "solver@proxqp"); later rounds and other builds run the default and ADMM.
 
 Per run: median wall time of the solve call (at least 3 runs, ~0.6 s of runs for fast solves,
 3 above 0.2 s, one above 3 s), relative residual (natural map / ‖b‖, Siconos' measure) of the
@@ -82,9 +84,12 @@ def worker(name: str, matrix: str, configs: list[str]) -> dict:
             out[config] = best
             continue
 
+        solver, _, start = config.partition("@")
+
         def run():
             t0 = time.perf_counter()
-            r = stiction.solve(problem, solver=config, tol=TARGET, max_iter=5000, time_limit=limit)
+            r = stiction.solve(problem, solver=solver, tol=TARGET, max_iter=5000, time_limit=limit,
+                               warm_start=start or None)
             return time.perf_counter() - t0, r
 
         seconds, r = repeated(run)
@@ -139,6 +144,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--build", action="append", default=[], metavar="NAME=PYTHONPATH")
     ap.add_argument("--solvers", default="default,admm,newton,nsgs")
+    ap.add_argument("--warm-start", action="store_true", help="also every solver from ProxQP's solution")
     ap.add_argument("--no-pinocchio", action="store_true")
     ap.add_argument("--json", type=Path, help="write (and resume from) every measurement here")
     ap.add_argument("--out", type=Path, help="write the Markdown summary here")
@@ -153,6 +159,8 @@ def main(argv=None) -> int:
         files = [f for f in files if any(s.lower() in f.lower() for s in args.filter.split(","))]
     results = json.loads(args.json.read_text()) if args.json and args.json.exists() else {}
     all_configs = args.solvers.split(",")
+    if args.warm_start:
+        all_configs += [f"{s}@proxqp" for s in all_configs]
     for name in files:
         for matrix in ("symmetrised", "stored"):
             key = f"{name}|{matrix}"
