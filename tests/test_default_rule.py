@@ -49,6 +49,21 @@ def test_large_sparse_problems_go_to_admm_without_a_gauss_seidel_prelude(name, s
     assert r.stages[0].outcome == "converged" and r.message == "converged (admm)"
 
 
+def test_a_warm_started_large_problem_tries_a_few_gauss_seidel_sweeps_before_admm():
+    """Warm-started (the simulator's previous step): at most 10 NSGS sweeps first; from the
+    solution itself that is one sweep, from the previous step's solution stored in the file
+    (Capsules-i97, relative residual 4e-3) the sweeps stop at 10 and ADMM finishes."""
+    P = fclib.load(FCLIB_DIR / "Capsules--Capsules-i97-269.hdf5")
+    problem = P.problem()
+    cold = stiction.solve(problem, tol=1e-8, max_iter=5000)
+    assert cold.converged and stage_names(cold) == ["admm"]
+    again = stiction.solve(problem, tol=1e-8, max_iter=5000, warm_start=cold.lam)
+    assert again.converged and stage_names(again) == ["nsgs"] and again.iterations <= 2, again.stages
+    warm = stiction.solve(problem, tol=1e-8, max_iter=5000, warm_start=P.guess)
+    assert warm.converged and stage_names(warm) == ["nsgs", "admm"], warm.stages
+    assert warm.stages[0].iterations == 10 and warm.stages[1].outcome == "converged"
+
+
 def test_admm_hands_over_to_newton_when_its_best_residual_stops_improving():
     """SpheresBox (768 rows, cond ~1e9): ADMM stays near its starting residual; its stall test
     stops it after the 400-iteration window and Newton from the initial guess solves it."""

@@ -44,7 +44,8 @@ class NewtonSolver final : public ContactSolver {
 ///   first, then Newton from ProxQP's facetized-cone solution if that failed.
 /// - Large sparse problems (> kAdmmAboveRows rows, <= 10 % nonzero): ADMM (sparse
 ///   factorization) until it converges or its best residual stops improving, then a few
-///   Newton steps from the best iterate if it is nearly there.
+///   Newton steps from the best iterate if it is nearly there; warm-started, at most
+///   kWarmSweeps NSGS sweeps first.
 /// - Otherwise NSGS while its rate promises to finish within ~m/2 sweeps and does not
 ///   decelerate; then Newton from the NSGS iterate (medium problems, <= kAdmmAboveRows rows)
 ///   or ADMM as above (large dense ones).
@@ -62,6 +63,8 @@ class DefaultSolver final : public ContactSolver {
   static constexpr Eigen::Index kAdmmAboveRows = 384;
   /// ADMM's stall horizon, in iterations per row (admm.hpp: switch_after).
   static constexpr double kAdmmHorizonPerRow = 10.0;
+  /// Gauss-Seidel sweeps tried before ADMM on a warm-started large sparse problem.
+  static constexpr int kWarmSweeps = 10;
   /// Newton steps from the best iterate after ADMM stalls, if its residual is within
   /// kPolishWithin x the tolerance.
   static constexpr int kPolishSteps = 5;
