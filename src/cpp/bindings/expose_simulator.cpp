@@ -92,17 +92,13 @@ void set_q_target(SimulatorData& d, const bp::object& x) { setChecked(d.control.
 void set_v_target(SimulatorData& d, const bp::object& x) { setChecked(d.control.v_target, x, "v_target"); }
 void set_tau_ff(SimulatorData& d, const bp::object& x) { setChecked(d.control.tau_ff, x, "tau_ff"); }
 
-Eigen::MatrixXd get_J(const SimulatorData& d) { return d.J; }
-Eigen::MatrixXd get_A(const SimulatorData& d) { return d.A; }
+Eigen::MatrixXd get_J(const SimulatorData& d) { return denseJacobian(d); }
+Eigen::MatrixXd get_A(const SimulatorData& d) { return denseDelassus(d); }
 Eigen::VectorXd get_b(const SimulatorData& d) { return d.b; }
 Eigen::VectorXd get_drift(const SimulatorData& d) { return d.drift; }
 Eigen::VectorXd get_position_error(const SimulatorData& d) { return d.position_error; }
 Eigen::VectorXd get_gaps(const SimulatorData& d) { return d.gaps; }
-Eigen::MatrixXd get_M(const SimulatorData& d) {  // symmetric, from Pinocchio's upper part
-  Eigen::MatrixXd M = d.data.M;
-  M.triangularView<Eigen::StrictlyLower>() = M.transpose();
-  return M;
-}
+Eigen::MatrixXd get_M(const SimulatorData& d) { return denseMassMatrix(d); }  // symmetric
 Eigen::VectorXd get_tau(const SimulatorData& d) { return d.tau; }
 Eigen::VectorXd get_nle(const SimulatorData& d) { return d.nle; }
 Eigen::MatrixXd get_candidate_lambda(const SimulatorData& d) { return d.candidate_lambda; }

@@ -23,7 +23,6 @@ void tangentsOf(const Eigen::Vector3d& n, Eigen::Vector3d& t1, Eigen::Vector3d& 
 
 void detectContacts(const SimulatorModel& sim, SimulatorData& sd) {
   const pinocchio::Model& model = sim.model;
-  const pinocchio::Data& data = sd.data;
   sd.active.clear();
   std::fill(sd.candidate_rows.begin(), sd.candidate_rows.end(), 0);
   // Half-spaces in world coordinates (a body's face moves with its frame).
@@ -40,7 +39,7 @@ void detectContacts(const SimulatorModel& sim, SimulatorData& sd) {
       sd.plane_offset[k] = h.offset;
     } else {
       const pinocchio::Frame& f = model.frames[h.frame];
-      const pinocchio::SE3 oMf = data.oMi[f.parentJoint] * f.placement;
+      const pinocchio::SE3 oMf = jointPlacement(sim, sd, f.parentJoint) * f.placement;
       sd.plane_normal.col(k) = oMf.rotation() * h.normal;
       sd.plane_t1.col(k) = oMf.rotation() * h.tangent1;
       sd.plane_t2.col(k) = oMf.rotation() * h.tangent2;
@@ -51,7 +50,7 @@ void detectContacts(const SimulatorModel& sim, SimulatorData& sd) {
   for (std::size_t i = 0; i < sim.contacts.size(); ++i) {
     const SphereContact& c = sim.contacts[i];
     const pinocchio::Frame& f = model.frames[c.frame];
-    const Eigen::Vector3d center = data.oMi[f.parentJoint].act(f.placement.act(c.offset));
+    const Eigen::Vector3d center = jointPlacement(sim, sd, f.parentJoint).act(f.placement.act(c.offset));
     sd.gaps[i] = sd.plane_normal.col(c.halfspace).dot(center) - sd.plane_offset[c.halfspace] - c.radius;
     if (sd.gaps[i] <= sim.settings.activation_distance) {
       sd.active.push_back(static_cast<int>(i));
@@ -61,7 +60,11 @@ void detectContacts(const SimulatorModel& sim, SimulatorData& sd) {
   // coal pairs: each reported point (signed distance below the activation
   // distance) fills the pair's next slot.
   if (sim.pairs.empty()) return;
-  pinocchio::updateGeometryPlacements(model, data, sim.geometry, sd.geometry_data);
+  // Geometry placements (pinocchio::updateGeometryPlacements, from the parts' placements).
+  for (std::size_t g = 0; g < sim.geometry.geometryObjects.size(); ++g) {
+    const pinocchio::GeometryObject& object = sim.geometry.geometryObjects[g];
+    sd.geometry_data.oMg[g] = jointPlacement(sim, sd, object.parentJoint) * object.placement;
+  }
   int slot = static_cast<int>(sim.contacts.size());
   for (const GeometryPairContact& g : sim.pairs) {
     coal::CollisionResult& res = sd.geometry_data.collisionResults[g.pair];

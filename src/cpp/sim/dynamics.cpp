@@ -13,6 +13,7 @@ namespace stiction {
 
 void computeControl(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                     const Eigen::VectorXd& v) {
+  sd.tau.resize(sim.model.nv);
   const JointControl& c = sd.control;
   const int nv = sim.model.nv;
   if (c.kp.size() != nv || c.kd.size() != nv || c.v_target.size() != nv || c.tau_ff.size() != nv ||
@@ -57,47 +58,121 @@ void nonLinearEffectsFromKinematics(const pinocchio::Model& model, pinocchio::Da
 
 void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                   const Eigen::VectorXd& v, double implicit_pd_step) {
-  const pinocchio::Model& model = sim.model;
-  pinocchio::Data& data = sd.data;
-  // q as Eigen::Ref: the instantiation libpinocchio ships (extern template), not a fresh one
-  // here (a VectorXd argument made this file take 55 s to compile instead of 14 s).
-  pinocchio::crba(model, data, Eigen::Ref<const Eigen::VectorXd>(q), pinocchio::Convention::LOCAL);
-  if (implicit_pd_step > 0.0) {
-    // Implicit joint PD over a step h: tau(q+, v+) ~ kp (q_t - q - h v+) + kd (v_t - v+)
-    // moves h kd + h^2 kp onto M's diagonal (stable for any gains; MuJoCo's implicitfast
-    // does the damping part). The -h kp v part of tau is added below.
-    const double h = implicit_pd_step;
-    data.M.diagonal() += h * sd.control.kd + h * h * sd.control.kp;
-  }
-  // M = U D U^T by Pinocchio's tree-sparse Cholesky (cheaper than a dense LLT).
-  pinocchio::cholesky::decompose(model, data);
-  if (model.nv > 0 && !(data.D.minCoeff() > 0.0))
-    throw std::runtime_error("the mass matrix is not positive definite at this configuration");
-  nonLinearEffectsFromKinematics(model, data, sd.forces, sd.nle);
-  computeControl(sim, sd, q, v);
+  computeControl(sim, sd, q, v);  // tau (world coordinates)
   if (implicit_pd_step > 0.0) sd.tau -= implicit_pd_step * sd.control.kp.cwiseProduct(v);
-  sd.v_free = sd.tau - sd.nle;
-  pinocchio::cholesky::solve(model, data, sd.v_free);  // M^-1 (tau - nle): the free acceleration
+  for (std::size_t s = 0; s < sim.systems.size(); ++s) {
+    const SystemModel& part = sim.systems[s];
+    const pinocchio::Model& model = part.model;
+    SystemWork& w = sd.parts[s];
+    // q as Eigen::Ref: the instantiation libpinocchio ships (extern template), not a fresh one
+    // here (a VectorXd argument made this file take 55 s to compile instead of 14 s).
+    pinocchio::crba(model, w.data, Eigen::Ref<const Eigen::VectorXd>(w.q), pinocchio::Convention::LOCAL);
+    if (implicit_pd_step > 0.0) {
+      // Implicit joint PD over a step h: tau(q+, v+) ~ kp (q_t - q - h v+) + kd (v_t - v+)
+      // moves h kd + h^2 kp onto M's diagonal (stable for any gains; MuJoCo's implicitfast
+      // does the damping part). The -h kp v part of tau is added above.
+      const double h = implicit_pd_step;
+      for (Eigen::Index k = 0; k < model.nv; ++k) {
+        const int world = part.v_index[k];
+        w.data.M(k, k) += h * sd.control.kd[world] + h * h * sd.control.kp[world];
+      }
+    }
+    // M = U D U^T by Pinocchio's tree-sparse Cholesky (cheaper than a dense LLT).
+    pinocchio::cholesky::decompose(model, w.data);
+    if (model.nv > 0 && !(w.data.D.minCoeff() > 0.0))
+      throw std::runtime_error("the mass matrix of '" + model.name + "' is not positive definite at this configuration");
+    nonLinearEffectsFromKinematics(model, w.data, w.forces, w.nle);
+    gatherV(part, sd.tau, w.tau);
+    w.v_free = w.tau - w.nle;
+    pinocchio::cholesky::solve(model, w.data, w.v_free);  // M^-1 (tau - nle): the free acceleration
+    scatterV(part, w.nle, sd.nle);
+    scatterV(part, w.v_free, sd.v_free);
+  }
 }
 
-void delassusOperator(SimulatorData& sd) {
-  // A = (D^-1/2 U^-1 J^T)^T (D^-1/2 U^-1 J^T): symmetric by construction.
+void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
+  // A = sum over parts of (D^-1/2 U^-1 J_s^T)^T (D^-1/2 U^-1 J_s^T): symmetric by construction.
   // (dense triangular solve: cheaper than Pinocchio's per-column Uiv at these sizes)
-  const Eigen::Index rows = sd.J.rows();
-  sd.W = sd.J.transpose();
-  sd.data.U.triangularView<Eigen::UnitUpper>().solveInPlace(sd.W);
-  sd.W = sd.data.Dinv.cwiseSqrt().asDiagonal() * sd.W;
-  sd.A.resize(rows, rows);
-  sd.A.setZero();
-  sd.A.selfadjointView<Eigen::Lower>().rankUpdate(sd.W.transpose());
-  sd.A.triangularView<Eigen::StrictlyUpper>() = sd.A.transpose();
+  const Eigen::Index rows = sd.rows;
+  Eigen::Index entries = 0;
+  for (SystemWork& w : sd.parts) {
+    const auto n = static_cast<Eigen::Index>(w.rows.size());
+    w.A.resize(n, n);
+    if (n == 0) continue;
+    w.W = w.J.transpose();
+    w.data.U.triangularView<Eigen::UnitUpper>().solveInPlace(w.W);
+    w.W = w.data.Dinv.cwiseSqrt().asDiagonal() * w.W;
+    w.A.setZero();
+    w.A.selfadjointView<Eigen::Lower>().rankUpdate(w.W.transpose());
+    w.A.triangularView<Eigen::StrictlyUpper>() = w.A.transpose();
+    entries += n * n;
+  }
+  // Sparse when the parts leave most of A empty: many parts, more rows than the dense
+  // solvers handle well (the default rule's threshold), at most 10 % of the entries.
+  sd.sparse = sd.parts.size() > 1 && rows > kSparseDelassusRows && entries * 10 <= rows * rows;
+  if (sd.sparse) {
+    sd.triplets.clear();
+    sd.triplets.reserve(static_cast<std::size_t>(entries));
+    for (const SystemWork& w : sd.parts)
+      for (Eigen::Index c = 0; c < w.A.cols() && !w.rows.empty(); ++c)
+        for (Eigen::Index r = 0; r < w.A.rows(); ++r)
+          sd.triplets.emplace_back(w.rows[r], w.rows[c], w.A(r, c));
+    sd.A_sparse.resize(rows, rows);
+    sd.A_sparse.setFromTriplets(sd.triplets.begin(), sd.triplets.end());  // sums the parts' shares
+    sd.A.resize(0, 0);
+    return;
+  }
+  sd.A_sparse.resize(0, 0);
+  if (wholeWorldPart(sim, sd)) {
+    sd.A = sd.parts[0].A;
+    return;
+  }
+  sd.A.setZero(rows, rows);
+  for (const SystemWork& w : sd.parts)
+    for (Eigen::Index c = 0; c < static_cast<Eigen::Index>(w.rows.size()); ++c)
+      for (Eigen::Index r = 0; r < static_cast<Eigen::Index>(w.rows.size()); ++r) sd.A(w.rows[r], w.rows[c]) += w.A(r, c);
 }
 
-void rightHandSide(SimulatorData& sd, const Eigen::VectorXd& v, double delta, double zeta, bool tangential_drift) {
+void multiplyJacobian(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& x, Eigen::VectorXd& y) {
+  if (wholeWorldPart(sim, sd)) {
+    y.noalias() = sd.parts[0].J * x;
+    return;
+  }
+  y.setZero(sd.rows);
+  for (std::size_t s = 0; s < sd.parts.size(); ++s) {
+    SystemWork& w = sd.parts[s];
+    if (w.rows.empty()) continue;
+    gatherV(sim.systems[s], x, w.x);
+    for (Eigen::Index r = 0; r < w.J.rows(); ++r) y[w.rows[r]] += w.J.row(r).dot(w.x);
+  }
+}
+
+void solveJacobianTransposed(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& lambda,
+                             Eigen::VectorXd& dv) {
+  if (wholeWorldPart(sim, sd)) {
+    dv.noalias() = sd.parts[0].J.transpose() * lambda;
+    pinocchio::cholesky::solve(sim.systems[0].model, sd.parts[0].data, dv);
+    return;
+  }
+  dv.setZero(sim.model.nv);
+  for (std::size_t s = 0; s < sd.parts.size(); ++s) {
+    SystemWork& w = sd.parts[s];
+    if (w.rows.empty()) continue;
+    w.x.setZero(w.J.cols());
+    for (Eigen::Index r = 0; r < w.J.rows(); ++r) w.x += lambda[w.rows[r]] * w.J.row(r).transpose();
+    pinocchio::cholesky::solve(sim.systems[s].model, w.data, w.x);
+    scatterV(sim.systems[s], w.x, dv);  // parts do not share coordinates
+  }
+}
+
+void rightHandSide(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v, double delta, double zeta,
+                   bool tangential_drift) {
   // eq. 27 with Phi = nle - tau: b = J M^-1 Phi - J' v - (2 zeta / delta) J v - Psi / delta^2
-  sd.b.noalias() = -sd.J * sd.v_free;
+  multiplyJacobian(sim, sd, sd.v_free, sd.row_scratch);
+  sd.b = -sd.row_scratch;
   sd.b -= sd.drift;
-  sd.b.noalias() -= (2.0 * zeta / delta) * (sd.J * v);
+  multiplyJacobian(sim, sd, v, sd.row_scratch);
+  sd.b -= (2.0 * zeta / delta) * sd.row_scratch;
   sd.b -= sd.position_error / (delta * delta);
   // Time stepping drops the J' v term on the tangential rows (the paper allows it, §3.3):
   // a sticking contact then ends the step with exactly zero slip velocity, J_t v+ = 0,

@@ -6,7 +6,6 @@
 #include <stdexcept>
 #include <string>
 
-#include <pinocchio/algorithm/cholesky.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
 
 #include "stages.hpp"
@@ -64,9 +63,8 @@ void acceleration(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
   solveContacts(sim, sd, 1.0);
   watch.lap(sd.timings.solve);
   a = sd.v_free;  // M^-1 (tau - nle)
-  if (sd.J.rows() > 0) {
-    sd.dv.noalias() = sd.J.transpose() * sd.lambda;
-    pinocchio::cholesky::solve(sim.model, sd.data, sd.dv);
+  if (sd.rows > 0) {
+    solveJacobianTransposed(sim, sd, sd.lambda, sd.dv);  // M^-1 J^T lambda
     a += sd.dv;
   }
   ++sd.rhs_evaluations;
@@ -78,13 +76,12 @@ void integrateTimeStep(const SimulatorModel& sim, SimulatorData& sd, double h) {
   sd.dv = h * sd.v_free;  // h M^-1 (tau - nle)
   addFrameTurn(sim, sd.v, h, sd.dv);
   sd.v += sd.dv;
-  if (sd.J.rows() > 0) {  // + M^-1 J^T P
-    sd.dv.noalias() = sd.J.transpose() * sd.result.lam;
-    pinocchio::cholesky::solve(sim.model, sd.data, sd.dv);
+  if (sd.rows > 0) {  // + M^-1 J^T P
+    solveJacobianTransposed(sim, sd, sd.result.lam, sd.dv);
     sd.v += sd.dv;
+    // contact velocities J(q_k) v+, in the frame the solve used
+    multiplyJacobian(sim, sd, sd.v, sd.row_velocity);
   }
-  // contact velocities J(q_k) v+, in the frame the solve used
-  if (sd.J.rows() > 0) sd.row_velocity.noalias() = sd.J * sd.v;
   integrateConfiguration(sim, sd.q, sd.v, h, sd.q_tmp);  // symplectic: uses v+
   sd.q = sd.q_tmp;
   sd.t += h;

@@ -1,5 +1,7 @@
-// Stages 1 and 3: forward kinematics, then the rows of the active contacts and anchors
-// (J, the drift J' v, the position error Psi).
+// Stages 1 and 3: forward kinematics of every part of the world, then the rows of the active
+// contacts and anchors (J by columns of parts, the drift J' v, the position error Psi).
+#include <array>
+
 #include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
@@ -14,18 +16,128 @@ void forwardKinematics(const SimulatorModel& sim, SimulatorData& sd, const Eigen
   // Kinematics with zero acceleration: the classical accelerations it leaves are J' v.
   // (computeAllTerms does it all in one pass but is slower here: it also computes
   // the centre of mass and its Jacobian.)
-  pinocchio::forwardKinematics(sim.model, sd.data, q, v, sd.zero_nv);
-  pinocchio::computeJointJacobians(sim.model, sd.data);
+  for (std::size_t s = 0; s < sim.systems.size(); ++s) {
+    const SystemModel& part = sim.systems[s];
+    SystemWork& w = sd.parts[s];
+    gatherQ(part, q, w.q);
+    gatherV(part, v, w.v);
+    pinocchio::forwardKinematics(part.model, w.data, w.q, w.v, w.zero);
+    pinocchio::computeJointJacobians(part.model, w.data);
+  }
 }
+
+namespace {
+
+// The two bodies of a block of rows: the rows measure the velocity of a point of `plus`
+// relative to a point of `minus` (joint 0: the world, which does not move).
+struct BlockBodies {
+  pinocchio::JointIndex plus = 0, minus = 0;
+};
+
+BlockBodies contactBodies(const SimulatorModel& sim, int i) {
+  if (sim.slot_pair[i] >= 0) {  // coal: geometry 2's material point w.r.t. geometry 1's
+    const pinocchio::CollisionPair& cp = sim.geometry.collisionPairs[sim.pairs[sim.slot_pair[i]].pair];
+    return {sim.geometry.geometryObjects[cp.second].parentJoint, sim.geometry.geometryObjects[cp.first].parentJoint};
+  }
+  const SphereContact& c = sim.contacts[i];
+  const HalfSpace& h = sim.halfspaces[c.halfspace];
+  return {sim.model.frames[c.frame].parentJoint, h.frame != 0 ? sim.model.frames[h.frame].parentJoint : 0};
+}
+
+BlockBodies anchorBodies(const SimulatorModel& sim, const PointAnchor& a) {
+  return {sim.model.frames[a.frame].parentJoint, a.frame2 != 0 ? sim.model.frames[a.frame2].parentJoint : 0};
+}
+
+int partOf(const SimulatorModel& sim, pinocchio::JointIndex j) { return j == 0 ? -1 : sim.joint_system[j]; }
+
+// The parts a block touches: its plus body's, then its minus body's when another (-1: none).
+std::array<int, 2> blockParts(const SimulatorModel& sim, const BlockBodies& b) {
+  const int s1 = partOf(sim, b.plus), s2 = partOf(sim, b.minus);
+  return {s1, s2 != s1 ? s2 : -1};
+}
+
+// Rows [row, row + k) of the problem belong to the parts the block touches.
+void reserveRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& b, Eigen::Index row, int k) {
+  for (int s : blockParts(sim, b))
+    if (s >= 0)
+      for (int r = 0; r < k; ++r) sd.parts[s].rows.push_back(static_cast<int>(row + r));
+}
+
+// The block's next k rows in each part it touches: T (rows 0..k-1) times the relative point
+// Jacobian, the plus body's point `at_plus` (a placement in its joint's frame) minus the
+// minus body's `at_minus`. `local_rows` receives each part's first local row.
+void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& b, const pinocchio::SE3& at_plus,
+               const pinocchio::SE3& at_minus, const Eigen::Matrix3d& T, int k, std::array<int, 2>& local_rows) {
+  const std::array<int, 2> parts = blockParts(sim, b);
+  for (int p = 0; p < 2; ++p) {
+    const int s = parts[p];
+    local_rows[p] = -1;
+    if (s < 0) continue;
+    const pinocchio::Model& m = sim.systems[s].model;
+    SystemWork& w = sd.parts[s];
+    w.Jrel.setZero();
+    if (partOf(sim, b.plus) == s) {
+      w.J6.setZero();
+      pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.plus], at_plus, pinocchio::LOCAL_WORLD_ALIGNED, w.J6);
+      w.Jrel += w.J6.topRows<3>();
+    }
+    if (partOf(sim, b.minus) == s) {
+      w.J6.setZero();
+      pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.minus], at_minus, pinocchio::LOCAL_WORLD_ALIGNED,
+                                  w.J6);
+      w.Jrel -= w.J6.topRows<3>();
+    }
+    const int lr = sd.part_fill[s];
+    sd.part_fill[s] += k;
+    for (int r = 0; r < k; ++r) w.J.row(lr + r).noalias() = T.row(r) * w.Jrel;
+    local_rows[p] = lr;
+  }
+}
+
+// The classical acceleration J' v of the point `at` (a placement in joint j's frame), in
+// world axes; 0 for the world.
+Eigen::Vector3d pointAcceleration(const SimulatorModel& sim, SimulatorData& sd, pinocchio::JointIndex j,
+                                  const pinocchio::SE3& at) {
+  if (j == 0) return Eigen::Vector3d::Zero();
+  const int s = sim.joint_system[j];
+  return pinocchio::getFrameClassicalAcceleration(sim.systems[s].model, sd.parts[s].data, sim.joint_local[j], at,
+                                                  pinocchio::LOCAL_WORLD_ALIGNED)
+      .linear();
+}
+
+// Row `local_row` of part s's J times the part's entries of the world vector x.
+double partRowDot(const SimulatorModel& sim, const SimulatorData& sd, int s, int local_row, const Eigen::VectorXd& x) {
+  const SystemModel& part = sim.systems[s];
+  const SystemWork& w = sd.parts[s];
+  if (part.v_start >= 0) return w.J.row(local_row).dot(x.segment(part.v_start, w.J.cols()));
+  double sum = 0.0;
+  for (Eigen::Index k = 0; k < w.J.cols(); ++k) sum += w.J(local_row, k) * x[part.v_index[k]];
+  return sum;
+}
+
+}  // namespace
 
 void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v) {
   const pinocchio::Model& model = sim.model;
-  pinocchio::Data& data = sd.data;
-  Eigen::Index rows = 3 * static_cast<Eigen::Index>(sim.anchors.size());
-  for (int i : sd.active) rows += sd.candidate_rows[i];
-  const int nv = model.nv;
-  if (sd.J.rows() != rows) {  // allocation only when the active set changes size
-    sd.J.resize(rows, nv);
+  // Which rows each part holds (a contact between two parts: both), then the parts' J.
+  for (SystemWork& w : sd.parts) w.rows.clear();
+  Eigen::Index rows = 0;
+  for (int i : sd.active) {
+    reserveRows(sim, sd, contactBodies(sim, i), rows, sd.candidate_rows[i]);
+    rows += sd.candidate_rows[i];
+  }
+  for (const PointAnchor& a : sim.anchors) {
+    reserveRows(sim, sd, anchorBodies(sim, a), rows, 3);
+    rows += 3;
+  }
+  sd.rows = rows;
+  for (std::size_t s = 0; s < sd.parts.size(); ++s) {
+    SystemWork& w = sd.parts[s];
+    const auto n = static_cast<Eigen::Index>(w.rows.size());
+    if (w.J.rows() != n) w.J.resize(n, sim.systems[s].model.nv);  // allocation only when the active set changes
+    sd.part_fill[s] = 0;
+  }
+  if (sd.b.size() != rows) {
     sd.b.resize(rows);
     sd.drift.resize(rows);
     sd.position_error.resize(rows);
@@ -35,128 +147,101 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
   sd.tangent_row.setZero();
 
   // Contact frames, Jacobians J (rows t1, t2, n), drifts J' v and gaps Psi.
-  sd.frame_turn.setZero(nv);
+  sd.frame_turn.setZero(model.nv);
   for (pinocchio::JointIndex j : sim.free_flyers) {
     const int iv = model.idx_vs[j];
     sd.frame_turn.segment<3>(iv) = v.segment<3>(iv + 3).cross(v.segment<3>(iv));
   }
+  Eigen::Matrix3d T;
+  std::array<int, 2> local_rows;
   Eigen::Index row = 0;
   for (int i : sd.active) {
+    const BlockBodies bodies = contactBodies(sim, i);
+    const int k = sd.candidate_rows[i];
     if (sim.slot_pair[i] >= 0) {
       // coal contact: relative velocity of geometry 2's material point w.r.t. geometry 1's
-      const pinocchio::CollisionPair& cp = sim.geometry.collisionPairs[sim.pairs[sim.slot_pair[i]].pair];
-      const pinocchio::JointIndex j1 = sim.geometry.geometryObjects[cp.first].parentJoint;
-      const pinocchio::JointIndex j2 = sim.geometry.geometryObjects[cp.second].parentJoint;
       const Eigen::Vector3d p = sd.slot_point.col(i), n = sd.slot_normal.col(i);
-      const Eigen::Vector3d t1 = sd.slot_t1.col(i), t2 = sd.slot_t2.col(i);
-      sd.Jrel.setZero(3, nv);
-      for (int side = 0; side < 2; ++side) {
-        const pinocchio::JointIndex j = side == 0 ? j2 : j1;
-        if (j == 0) continue;  // fixed in the world
-        const double sign = side == 0 ? 1.0 : -1.0;
-        const pinocchio::SE3 at(Eigen::Matrix3d::Identity(), data.oMi[j].actInv(p));
-        sd.J6.setZero();
-        pinocchio::getFrameJacobian(model, data, j, at, pinocchio::LOCAL_WORLD_ALIGNED, sd.J6);
-        sd.Jrel += sign * sd.J6.topRows<3>();
+      const pinocchio::SE3 at_plus(Eigen::Matrix3d::Identity(), jointPlacement(sim, sd, bodies.plus).actInv(p));
+      const pinocchio::SE3 at_minus(Eigen::Matrix3d::Identity(), jointPlacement(sim, sd, bodies.minus).actInv(p));
+      if (k == 3) {  // else frictionless (or mu = 0): the normal row only
+        T.row(0) = sd.slot_t1.col(i).transpose();
+        T.row(1) = sd.slot_t2.col(i).transpose();
       }
+      T.row(k - 1) = n.transpose();
+      writeRows(sim, sd, bodies, at_plus, at_minus, T, k, local_rows);
       // The drift of a coal row is that of a motion whose free-flyer origins keep
       // their world velocity (J c, c = omega x v on each free flyer's linear rows):
       // the material points' accelerations are not the gap's (a rolling sphere's
       // contact point accelerates towards its centre while the gap stays 0), and for
       // general shapes the gap's curvature terms are not available; the position
       // term Psi / delta^2 keeps the constraint.
-      if (sd.candidate_rows[i] == 3) {  // else frictionless (or mu = 0): the normal row only
-        sd.J.row(row) = t1.transpose() * sd.Jrel;
-        sd.drift[row] = sd.J.row(row).dot(sd.frame_turn);
-        sd.tangent_row[row++] = 1.0;
-        sd.J.row(row) = t2.transpose() * sd.Jrel;
-        sd.drift[row] = sd.J.row(row).dot(sd.frame_turn);
-        sd.tangent_row[row++] = 1.0;
+      const std::array<int, 2> parts = blockParts(sim, bodies);
+      for (int r = 0; r < k; ++r) {
+        double drift = 0.0;
+        for (int p = 0; p < 2; ++p)
+          if (parts[p] >= 0) drift += partRowDot(sim, sd, parts[p], local_rows[p] + r, sd.frame_turn);
+        sd.drift[row + r] = drift;
+        sd.tangent_row[row + r] = r + 1 < k ? 1.0 : 0.0;
       }
-      sd.J.row(row) = n.transpose() * sd.Jrel;
-      sd.drift[row] = sd.J.row(row).dot(sd.frame_turn);
-      sd.position_error[row++] = sd.gaps[i];
+      sd.position_error[row + k - 1] = sd.gaps[i];
+      row += k;
       continue;
     }
     const SphereContact& c = sim.contacts[i];
     const pinocchio::Frame& f = model.frames[c.frame];
-    const HalfSpace& h = sim.halfspaces[c.halfspace];
     const Eigen::Vector3d n = sd.plane_normal.col(c.halfspace);
     const Eigen::Vector3d t1 = sd.plane_t1.col(c.halfspace), t2 = sd.plane_t2.col(c.halfspace);
-    const pinocchio::JointIndex j = f.parentJoint;
+    const pinocchio::SE3& oMj = jointPlacement(sim, sd, bodies.plus);
     const Eigen::Vector3d center_j = f.placement.act(c.offset);
-    const Eigen::Vector3d point_w = data.oMi[j].act(center_j) - c.radius * n;
-    const pinocchio::SE3 at_point(Eigen::Matrix3d::Identity(), data.oMi[j].actInv(point_w));
-    sd.J6.setZero();
-    pinocchio::getFrameJacobian(model, data, j, at_point, pinocchio::LOCAL_WORLD_ALIGNED, sd.J6);
+    const Eigen::Vector3d point_w = oMj.act(center_j) - c.radius * n;
+    const pinocchio::SE3 at_point(Eigen::Matrix3d::Identity(), oMj.actInv(point_w));
+    // A body's face (minus != 0): velocities relative to the face's material point at the
+    // contact. (The face's rotation adds terms of order |omega| |v_rel| to the drift that
+    // are left out; the position term corrects what they would.)
+    const pinocchio::SE3 plane_at_point(Eigen::Matrix3d::Identity(),
+                                        jointPlacement(sim, sd, bodies.minus).actInv(point_w));
+    int r = 0;
+    if (k >= 2) T.row(r++) = t1.transpose();  // planar and spatial: t1 (planar scenes: the in-plane tangent)
+    if (k == 3) T.row(r++) = t2.transpose();
+    T.row(r) = n.transpose();
+    writeRows(sim, sd, bodies, at_point, plane_at_point, T, k, local_rows);
     // Tangential rows: the material point at the contact (slip velocity); normal
     // row: the sphere's centre, whose normal motion is exactly the gap's.
-    Eigen::Vector3d acc_point =
-        pinocchio::getFrameClassicalAcceleration(model, data, j, at_point, pinocchio::LOCAL_WORLD_ALIGNED).linear();
     const pinocchio::SE3 at_center(Eigen::Matrix3d::Identity(), center_j);
-    Eigen::Vector3d acc_center =
-        pinocchio::getFrameClassicalAcceleration(model, data, j, at_center, pinocchio::LOCAL_WORLD_ALIGNED).linear();
-    sd.Jrel = sd.J6.topRows<3>();
-    if (h.frame != 0) {
-      // A body's face: velocities relative to the face's material point at the
-      // contact. (The face's rotation adds terms of order |omega| |v_rel| to the
-      // drift that are left out; the position term corrects what they would.)
-      const pinocchio::JointIndex jp = model.frames[h.frame].parentJoint;
-      const pinocchio::SE3 plane_at_point(Eigen::Matrix3d::Identity(), data.oMi[jp].actInv(point_w));
-      sd.J6.setZero();
-      pinocchio::getFrameJacobian(model, data, jp, plane_at_point, pinocchio::LOCAL_WORLD_ALIGNED, sd.J6);
-      sd.Jrel -= sd.J6.topRows<3>();
-      const Eigen::Vector3d acc_plane = pinocchio::getFrameClassicalAcceleration(
-          model, data, jp, plane_at_point, pinocchio::LOCAL_WORLD_ALIGNED).linear();
-      acc_point -= acc_plane;
-      acc_center -= acc_plane;
-    }
-    const int k = sd.candidate_rows[i];
-    if (k >= 2) {  // planar and spatial: t1 (planar scenes: the in-plane tangent)
-      sd.J.row(row) = t1.transpose() * sd.Jrel;
-      sd.drift[row] = t1.dot(acc_point);
-      sd.tangent_row[row] = 1.0;
-      ++row;
+    const Eigen::Vector3d acc_plane = pointAcceleration(sim, sd, bodies.minus, plane_at_point);
+    const Eigen::Vector3d acc_point = pointAcceleration(sim, sd, bodies.plus, at_point) - acc_plane;
+    const Eigen::Vector3d acc_center = pointAcceleration(sim, sd, bodies.plus, at_center) - acc_plane;
+    r = 0;
+    if (k >= 2) {
+      sd.drift[row + r] = t1.dot(acc_point);
+      sd.tangent_row[row + r++] = 1.0;
     }
     if (k == 3) {
-      sd.J.row(row) = t2.transpose() * sd.Jrel;
-      sd.drift[row] = t2.dot(acc_point);
-      sd.tangent_row[row] = 1.0;
-      ++row;
+      sd.drift[row + r] = t2.dot(acc_point);
+      sd.tangent_row[row + r++] = 1.0;
     }
-    sd.J.row(row) = n.transpose() * sd.Jrel;
-    sd.drift[row] = n.dot(acc_center);
-    sd.position_error[row] = sd.gaps[i];
-    ++row;
+    sd.drift[row + r] = n.dot(acc_center);
+    sd.position_error[row + r] = sd.gaps[i];
+    row += k;
   }
   for (const PointAnchor& a : sim.anchors) {
     // point 1 (frame, offset) against point 2: the world point `target`, or with
     // frame2 != 0 the point (frame2, offset2) of another body: a closed loop.
-    const pinocchio::Frame& f = model.frames[a.frame];
-    const pinocchio::JointIndex j = f.parentJoint;
-    const Eigen::Vector3d point_j = f.placement.act(a.offset);
+    const BlockBodies bodies = anchorBodies(sim, a);
+    const Eigen::Vector3d point_j = model.frames[a.frame].placement.act(a.offset);
     const pinocchio::SE3 at_point(Eigen::Matrix3d::Identity(), point_j);
-    sd.J6.setZero();
-    pinocchio::getFrameJacobian(model, data, j, at_point, pinocchio::LOCAL_WORLD_ALIGNED, sd.J6);
-    sd.J.middleRows(row, 3) = sd.J6.topRows<3>();
-    sd.drift.segment<3>(row) =
-        pinocchio::getFrameClassicalAcceleration(model, data, j, at_point, pinocchio::LOCAL_WORLD_ALIGNED).linear();
     Eigen::Vector3d other = a.target;
+    pinocchio::SE3 at_point2 = pinocchio::SE3::Identity();
     if (a.frame2 != 0) {
-      const pinocchio::Frame& f2 = model.frames[a.frame2];
-      const pinocchio::JointIndex j2 = f2.parentJoint;
-      const Eigen::Vector3d point2_j = f2.placement.act(a.offset2);
-      other = data.oMi[j2].act(point2_j);
-      if (j2 != 0) {
-        const pinocchio::SE3 at_point2(Eigen::Matrix3d::Identity(), point2_j);
-        sd.J6.setZero();
-        pinocchio::getFrameJacobian(model, data, j2, at_point2, pinocchio::LOCAL_WORLD_ALIGNED, sd.J6);
-        sd.J.middleRows(row, 3) -= sd.J6.topRows<3>();
-        sd.drift.segment<3>(row) -=
-            pinocchio::getFrameClassicalAcceleration(model, data, j2, at_point2, pinocchio::LOCAL_WORLD_ALIGNED).linear();
-      }
+      const Eigen::Vector3d point2_j = model.frames[a.frame2].placement.act(a.offset2);
+      other = jointPlacement(sim, sd, bodies.minus).act(point2_j);
+      at_point2 = pinocchio::SE3(Eigen::Matrix3d::Identity(), point2_j);
     }
-    sd.position_error.segment<3>(row) = data.oMi[j].act(point_j) - other;
+    writeRows(sim, sd, bodies, at_point, at_point2, Eigen::Matrix3d::Identity(), 3, local_rows);
+    sd.drift.segment<3>(row) = pointAcceleration(sim, sd, bodies.plus, at_point) -
+                               (a.frame2 != 0 ? pointAcceleration(sim, sd, bodies.minus, at_point2)
+                                              : Eigen::Vector3d::Zero());
+    sd.position_error.segment<3>(row) = jointPlacement(sim, sd, bodies.plus).act(point_j) - other;
     row += 3;
   }
 }

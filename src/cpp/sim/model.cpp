@@ -27,6 +27,46 @@ void completeTangents(HalfSpace& h) {
   h.tangent2 = h.normal.cross(h.tangent1);  // (t1, t2, n) right-handed
 }
 
+// The world's subtrees (children of the universe) as separate models: joints copied in
+// order (a parent before its children), with their placements, inertias and armature.
+void splitIntoSystems(const pinocchio::Model& world, std::vector<SystemModel>& systems,
+                      std::vector<int>& joint_system, std::vector<pinocchio::JointIndex>& joint_local) {
+  const auto njoints = static_cast<pinocchio::JointIndex>(world.njoints);
+  joint_system.assign(njoints, -1);
+  joint_local.assign(njoints, 0);
+  for (pinocchio::JointIndex j = 1; j < njoints; ++j) {
+    if (world.joints[j].shortname() == "JointModelMimic")
+      throw std::invalid_argument("joint '" + world.names[j] + "': mimic joints are not supported by the simulator");
+    const pinocchio::JointIndex parent = world.parents[j];
+    if (parent == 0) {
+      joint_system[j] = static_cast<int>(systems.size());
+      systems.emplace_back();
+      systems.back().model.name = world.names[j];
+      systems.back().model.gravity = world.gravity;
+    } else {
+      joint_system[j] = joint_system[parent];
+    }
+    SystemModel& part = systems[joint_system[j]];
+    const pinocchio::JointIndex local = part.model.addJoint(parent == 0 ? 0 : joint_local[parent], world.joints[j],
+                                                            world.jointPlacements[j], world.names[j]);
+    part.model.appendBodyToJoint(local, world.inertias[j], pinocchio::SE3::Identity());
+    joint_local[j] = local;
+    const int nv_j = world.nvs[j];
+    part.model.armature.segment(part.model.idx_vs[local], nv_j) = world.armature.segment(world.idx_vs[j], nv_j);
+    for (int k = 0; k < world.nqs[j]; ++k) part.q_index.push_back(world.idx_qs[j] + k);
+    for (int k = 0; k < nv_j; ++k) part.v_index.push_back(world.idx_vs[j] + k);
+  }
+  const auto contiguousStart = [](const std::vector<int>& index) {
+    for (std::size_t k = 1; k < index.size(); ++k)
+      if (index[k] != index[0] + static_cast<int>(k)) return -1;
+    return index.empty() ? -1 : index[0];
+  };
+  for (SystemModel& part : systems) {
+    part.q_start = contiguousStart(part.q_index);
+    part.v_start = contiguousStart(part.v_index);
+  }
+}
+
 }  // namespace
 
 SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfSpace> halfspaces_,
@@ -96,6 +136,7 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
         "eq. 83-84): it needs mode 'timestep', not an ODE mode");
   for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
     if (model.joints[j].shortname() == "JointModelFreeFlyer") free_flyers.push_back(j);
+  splitIntoSystems(model, systems, joint_system, joint_local);
   slot_pair.assign(contacts.size(), -1);
   for (std::size_t p = 0; p < pairs.size(); ++p) {
     const GeometryPairContact& g = pairs[p];
@@ -115,12 +156,27 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
   num_candidates = static_cast<int>(slot_pair.size());
 }
 
+SystemWork::SystemWork(const SystemModel& s)
+    : data(s.model),
+      v_index(s.v_index),
+      q(pinocchio::neutral(s.model)),
+      v(Eigen::VectorXd::Zero(s.model.nv)),
+      zero(Eigen::VectorXd::Zero(s.model.nv)),
+      tau(Eigen::VectorXd::Zero(s.model.nv)),
+      nle(Eigen::VectorXd::Zero(s.model.nv)),
+      v_free(Eigen::VectorXd::Zero(s.model.nv)),
+      x(Eigen::VectorXd::Zero(s.model.nv)),
+      J6(Eigen::MatrixXd::Zero(6, s.model.nv)),
+      Jrel(Eigen::Matrix3Xd::Zero(3, s.model.nv)) {}
+
 SimulatorData::SimulatorData(const SimulatorModel& sim)
-    : data(sim.model),
-      q(pinocchio::neutral(sim.model)),
+    : q(pinocchio::neutral(sim.model)),
       v(Eigen::VectorXd::Zero(sim.model.nv)),
       geometry_data(sim.geometry),
       solver(makeSolver(sim.settings.solver)) {
+  parts.reserve(sim.systems.size());
+  for (const SystemModel& s : sim.systems) parts.emplace_back(s);
+  part_fill.assign(sim.systems.size(), 0);
   FormulationSettings fs = sim.settings.formulation_settings;
   fs.exact_solver = sim.settings.solver;
   solver = makeFormulation(sim.settings.formulation, fs);
@@ -139,7 +195,6 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
     req.security_margin = sim.settings.activation_distance;
     req.enable_contact = true;
   }
-  J6.resize(6, nv);
   tau.resize(nv);
   nle.resize(nv);
   zero_nv = Eigen::VectorXd::Zero(nv);
@@ -152,6 +207,35 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
   candidate_velocity = Eigen::MatrixXd::Zero(3, nc);
   candidate_states.assign(nc, ContactState::kOpen);
   candidate_rows.assign(nc, 0);
+}
+
+}  // namespace stiction
+
+namespace stiction {
+
+Eigen::MatrixXd denseJacobian(const SimulatorData& sd) {
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(sd.rows, sd.v.size());
+  for (const SystemWork& w : sd.parts)
+    for (Eigen::Index r = 0; r < static_cast<Eigen::Index>(w.rows.size()); ++r)
+      for (Eigen::Index k = 0; k < w.J.cols(); ++k) J(w.rows[r], w.v_index[k]) += w.J(r, k);
+  return J;
+}
+
+Eigen::MatrixXd denseMassMatrix(const SimulatorData& sd) {
+  Eigen::MatrixXd M = Eigen::MatrixXd::Zero(sd.v.size(), sd.v.size());
+  for (const SystemWork& w : sd.parts) {
+    // crba fills the upper triangle
+    const auto n = static_cast<Eigen::Index>(w.v_index.size());
+    for (Eigen::Index c = 0; c < n; ++c)
+      for (Eigen::Index r = 0; r < n; ++r)
+        M(w.v_index[r], w.v_index[c]) = r <= c ? w.data.M(r, c) : w.data.M(c, r);
+  }
+  return M;
+}
+
+Eigen::MatrixXd denseDelassus(const SimulatorData& sd) {
+  if (sd.sparse) return Eigen::MatrixXd(sd.A_sparse);
+  return sd.A;
 }
 
 }  // namespace stiction

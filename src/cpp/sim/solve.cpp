@@ -62,12 +62,14 @@ std::string unsolvableMessage(const SimulatorModel& sim, const SimulatorData& sd
 }  // namespace
 
 void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
-  const Eigen::Index rows = sd.J.rows();
-  if (!sd.A.allFinite() || !sd.b.allFinite())
+  const Eigen::Index rows = sd.rows;
+  const bool finite_A =
+      sd.sparse ? Eigen::Map<const Eigen::VectorXd>(sd.A_sparse.valuePtr(), sd.A_sparse.nonZeros()).allFinite()
+                : sd.A.allFinite();
+  if (!finite_A || !sd.b.allFinite())
     throw std::runtime_error("simulation diverged: non-finite Delassus operator or right-hand side at t = " +
                              std::to_string(sd.t));
-  // Rebuild the problem only when the active set changed.
-  if (!sd.problem || sd.active != sd.problem_active) {
+  const auto constraints = [&] {
     std::vector<Constraint> cons;
     for (int i : sd.active)
       switch (sd.candidate_rows[i]) {
@@ -76,16 +78,21 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
         default: cons.push_back(Constraint::spatialFriction(candidateMu(sim, i)));
       }
     for (std::size_t a = 0; a < sim.anchors.size(); ++a) cons.push_back(Constraint::bilateral(3));
+    return cons;
+  };
+  if (sd.sparse) {  // a new operator each step: its pattern follows the contacts
+    sd.delassus.reset();
+    sd.problem = std::make_unique<ContactProblem>(std::make_shared<SparseDelassus>(sd.A_sparse), scale * sd.b,
+                                                  constraints(), 1e-6, false);
+  } else if (!sd.problem || !sd.delassus || sd.active != sd.problem_active) {
     sd.delassus = std::make_shared<DenseDelassus>(sd.A);
-    // A = W^T W is semi-definite by construction: no Cholesky check per active-set change.
-    sd.problem = std::make_unique<ContactProblem>(sd.delassus, scale * sd.b, std::move(cons), 1e-6, false);
+    sd.problem = std::make_unique<ContactProblem>(sd.delassus, scale * sd.b, constraints(), 1e-6, false);
     sd.problem_active = sd.active;
   } else {
     sd.delassus->matrix() = sd.A;
     sd.b_scaled = scale * sd.b;
     sd.problem->setB(sd.b_scaled);
   }
-  // Warm start: the last lambda of each candidate that is active again.
   SolverSettings settings = sim.settings.solver_settings;
   sd.guess.resize(rows);
   bool any = false;

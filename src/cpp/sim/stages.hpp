@@ -31,7 +31,7 @@ namespace stages {
 // ---- stage functions
 
 /// 1. Forward kinematics at (q, v) with zero acceleration (the classical accelerations it
-/// leaves are J' v) and the world-frame joint Jacobians, in sd.data.
+/// leaves are J' v) and the world-frame joint Jacobians, per part (sd.parts[s].data).
 void forwardKinematics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                        const Eigen::VectorXd& v);
 
@@ -45,18 +45,19 @@ void detectContacts(const SimulatorModel& sim, SimulatorData& sd);
 void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v);
 
 /// 4a. M (crba; h kd + h^2 kp on its diagonal when implicit_pd_step = h > 0), its factor
-/// M = U D U^T in sd.data, nle, the control torque tau and v_free = M^-1 (tau - nle).
+/// M = U D U^T per part, nle, the control torque tau and v_free = M^-1 (tau - nle).
 /// Throws when M is not positive definite.
 void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                   const Eigen::VectorXd& v, double implicit_pd_step);
 
-/// 4b. A = J M^-1 J^T (eq. 22) as W^T W, W = D^-1/2 U^-1 J^T: symmetric by construction.
-void delassusOperator(SimulatorData& sd);
+/// 4b. A = J M^-1 J^T (eq. 22) = sum over parts of W_s^T W_s, W_s = D_s^-1/2 U_s^-1 J_s^T:
+/// symmetric by construction; dense, or sparse (sd.sparse) when many parts share > 384 rows.
+void delassusOperator(const SimulatorModel& sim, SimulatorData& sd);
 
 /// 4c. b of eq. 27 with Phi = nle - tau: J M^-1 Phi - J' v - (2 zeta / delta) J v - Psi / delta^2;
 /// without the J' v term on tangential rows when tangential_drift is false (time stepping).
-void rightHandSide(SimulatorData& sd, const Eigen::VectorXd& v, double delta, double zeta,
-                   bool tangential_drift = true);
+void rightHandSide(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v, double delta,
+                   double zeta, bool tangential_drift = true);
 
 /// 5. Solve eq. 65 for sd.A, sd.b (scaled by `scale`: h for impulses) with the model's
 /// formulation, warm-started from the previous lambda of the same candidates; per-candidate
@@ -72,6 +73,65 @@ void integrateRK4(const SimulatorModel& sim, SimulatorData& sd);
 
 /// 6. The relaxed DAI as an ODE: one accepted Bogacki-Shampine 3(2) step of at most dt.
 void integrateAdaptive(const SimulatorModel& sim, SimulatorData& sd);
+
+/// Above this many rows, a world of several parts whose A is at most 10 % nonzero gets a
+/// sparse Delassus operator (the default solver's rule sends such problems to sparse ADMM).
+constexpr Eigen::Index kSparseDelassusRows = 384;
+
+// ---- the world's parts (SimulatorModel::systems, SimulatorData::parts)
+
+/// local = the part's entries of the world vector x (velocity coordinates).
+inline void gatherV(const SystemModel& s, const Eigen::VectorXd& x, Eigen::VectorXd& local) {
+  const auto n = static_cast<Eigen::Index>(s.v_index.size());
+  if (s.v_start >= 0) {
+    local = x.segment(s.v_start, n);
+    return;
+  }
+  local.resize(n);
+  for (Eigen::Index k = 0; k < n; ++k) local[k] = x[s.v_index[k]];
+}
+
+/// local = the part's entries of the world configuration q.
+inline void gatherQ(const SystemModel& s, const Eigen::VectorXd& q, Eigen::VectorXd& local) {
+  const auto n = static_cast<Eigen::Index>(s.q_index.size());
+  if (s.q_start >= 0) {
+    local = q.segment(s.q_start, n);
+    return;
+  }
+  local.resize(n);
+  for (Eigen::Index k = 0; k < n; ++k) local[k] = q[s.q_index[k]];
+}
+
+/// The part's entries of the world vector x = local.
+inline void scatterV(const SystemModel& s, const Eigen::VectorXd& local, Eigen::VectorXd& x) {
+  if (s.v_start >= 0) {
+    x.segment(s.v_start, local.size()) = local;
+    return;
+  }
+  for (Eigen::Index k = 0; k < local.size(); ++k) x[s.v_index[k]] = local[k];
+}
+
+/// True when the problem is one part's alone, its rows the problem's rows in order and its
+/// coordinates the world's (a robot on the ground): the products need no gather or scatter.
+inline bool wholeWorldPart(const SimulatorModel& sim, const SimulatorData& sd) {
+  return sd.parts.size() == 1 && static_cast<Eigen::Index>(sd.parts[0].rows.size()) == sd.rows &&
+         sim.systems[0].v_start == 0;
+}
+
+/// The world placement of world joint j (the identity for the universe, j = 0).
+inline const pinocchio::SE3& jointPlacement(const SimulatorModel& sim, const SimulatorData& sd,
+                                            pinocchio::JointIndex j) {
+  static const pinocchio::SE3 kIdentity = pinocchio::SE3::Identity();
+  if (j == 0) return kIdentity;
+  return sd.parts[sim.joint_system[j]].data.oMi[sim.joint_local[j]];
+}
+
+/// y = J x: the problem's rows of a world velocity x (y sized to sd.rows).
+void multiplyJacobian(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& x, Eigen::VectorXd& y);
+
+/// dv = M^-1 J^T lambda in world coordinates, from each part's factor M = U D U^T.
+void solveJacobianTransposed(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& lambda,
+                             Eigen::VectorXd& dv);
 
 // ---- timing
 

@@ -85,8 +85,8 @@ void endStep(const SimulatorModel& sim, SimulatorData& sd, bool first) {
     for (int i : sd.active) sd.reference_penetration = std::max(sd.reference_penetration, -sd.gaps[i]);
   checkBlowUp(sim, sd);
   sd.candidate_velocity.setZero();
-  if (sd.J.rows() > 0) {
-    if (sim.settings.mode != IntegrationMode::kTimeStepping) sd.row_velocity.noalias() = sd.J * sd.v;
+  if (sd.rows > 0) {
+    if (sim.settings.mode != IntegrationMode::kTimeStepping) multiplyJacobian(sim, sd, sd.v, sd.row_velocity);
     Eigen::Index row = 0;
     for (int i : sd.active) {
       sd.candidate_velocity.col(i) = toSlots(sd.row_velocity.data() + row, sd.candidate_rows[i]);
@@ -105,8 +105,8 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
   contactJacobians(sim, sd, v);
   watch.lap(sd.timings.kinematics);
   freeDynamics(sim, sd, q, v, implicit_pd_step);
-  delassusOperator(sd);
-  rightHandSide(sd, v, delta, zeta);
+  delassusOperator(sim, sd);
+  rightHandSide(sim, sd, v, delta, zeta);
   watch.lap(sd.timings.delassus);
 }
 
@@ -122,8 +122,8 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
       contactJacobians(sim, sd, sd.v);         // J, drift J' v, Psi
       watch.lap(sd.timings.kinematics);
       freeDynamics(sim, sd, sd.q, sd.v, sim.settings.implicit_pd ? h : 0.0);  // M = U D U^T, M^-1 (tau - nle)
-      delassusOperator(sd);                                                    // A = J M^-1 J^T
-      rightHandSide(sd, sd.v, h, 0.5, /*tangential_drift=*/false);             // b (eq. 27)
+      delassusOperator(sim, sd);                                               // A = J M^-1 J^T
+      rightHandSide(sim, sd, sd.v, h, 0.5, /*tangential_drift=*/false);        // b (eq. 27)
       watch.lap(sd.timings.delassus);
       solveContacts(sim, sd, h);  // A P - h b in -N(P), by the formulation
       watch.lap(sd.timings.solve);

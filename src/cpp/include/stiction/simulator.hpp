@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/SparseCore>
 #include <pinocchio/multibody/data.hpp>
 #include <pinocchio/multibody/geometry.hpp>
 #include <pinocchio/multibody/model.hpp>
@@ -117,6 +118,17 @@ struct JointControl {
   Eigen::VectorXd tau_ff;     ///< nv
 };
 
+/// An independent part of the world: a subtree of the model hanging from the universe (a
+/// robot, a free body), given a Model of its own so that its Data is sized by its own nv
+/// (a Pinocchio Data holds nv^3 tensors: one Data for 64 free cubes in one Model is 1.9 GB).
+/// Parts interact only through contacts: A = sum over parts of J_s M_s^-1 J_s^T (eq. 22),
+/// block-sparse when the parts are many.
+struct SystemModel {
+  pinocchio::Model model;
+  std::vector<int> q_index, v_index;  ///< the world coordinate of each local q, v coordinate
+  int q_start = -1, v_start = -1;     ///< the first world coordinate when contiguous (else -1)
+};
+
 class SimulatorModel {
  public:
   SimulatorModel(const pinocchio::Model& model, std::vector<HalfSpace> halfspaces,
@@ -134,6 +146,10 @@ class SimulatorModel {
 
   // derived
   std::vector<pinocchio::JointIndex> free_flyers;
+  /// The parts of the world (one per subtree of the universe), in the order of their roots.
+  std::vector<SystemModel> systems;
+  std::vector<int> joint_system;                   ///< world joint -> its part (-1: the universe)
+  std::vector<pinocchio::JointIndex> joint_local;  ///< world joint -> its index in its part's model
   /// Candidates: the sphere contacts, then max_contacts slots per pair.
   int numCandidates() const { return num_candidates; }
   int num_candidates = 0;
@@ -149,19 +165,40 @@ struct StepTimings {
   double total = 0.0;
 };
 
+/// The workspace of one part: its Pinocchio Data, its coordinates, and its columns of the
+/// contact Jacobian (the rows of the contacts that touch it).
+struct SystemWork {
+  explicit SystemWork(const SystemModel& s);
+
+  pinocchio::Data data;
+  std::vector<int> v_index;  ///< the world velocity coordinate of each local one (SystemModel's)
+  Eigen::VectorXd q, v, zero, tau, nle, v_free, x;  ///< local coordinates; x: scratch
+  std::vector<int> rows;  ///< the problem row of each row of J (contacts touching this part)
+  Eigen::MatrixXd J;      ///< rows x nv of the part: its columns of the contact Jacobian
+  Eigen::MatrixXd W;      ///< D^-1/2 U^-1 J^T (M = U D U^T)
+  Eigen::MatrixXd A;      ///< W^T W = J M^-1 J^T of this part (eq. 22)
+  Eigen::MatrixXd J6;     ///< 6 x nv: one point's Jacobian
+  Eigen::Matrix3Xd Jrel;  ///< 3 x nv: one contact's relative point Jacobian
+  std::vector<pinocchio::Force> forces;
+};
+
 class SimulatorData {
  public:
   explicit SimulatorData(const SimulatorModel& sim);
 
-  pinocchio::Data data;
+  std::vector<SystemWork> parts;  ///< per part of the world (SimulatorModel::systems)
   Eigen::VectorXd q, v;
   double t = 0.0;
   JointControl control;
 
   // The last contact problem (active blocks in candidate order, then anchors).
   std::vector<int> active;           ///< candidate index of each active contact block
-  Eigen::MatrixXd J;                 ///< rows x nv, per contact (t1, t2, n), (t1, n) or (n), then anchors
-  Eigen::MatrixXd A;                 ///< rows x rows, J M^-1 J^T (eq. 22)
+  /// Rows of the problem: per contact (t1, t2, n), (t1, n) or (n), then anchors. The Jacobian
+  /// J (rows x nv) is held by columns of parts (SystemWork::J); denseJacobian() assembles it.
+  Eigen::Index rows = 0;
+  Eigen::MatrixXd A;                 ///< rows x rows, J M^-1 J^T (eq. 22), when dense
+  Eigen::SparseMatrix<double> A_sparse;  ///< the same when sparse (many parts, > 384 rows)
+  bool sparse = false;               ///< which of A, A_sparse holds the last problem's operator
   Eigen::VectorXd b;                 ///< eq. 27 at force level
   Eigen::VectorXd drift;             ///< J' v per row
   Eigen::VectorXd position_error;    ///< Psi per row (gap on normal rows, anchor error; 0 else)
@@ -201,18 +238,28 @@ class SimulatorData {
   Eigen::Matrix3Xd slot_point, slot_normal, slot_t1, slot_t2;  ///< per candidate (pair slots only)
 
   // Workspace, reused from step to step.
-  Eigen::MatrixXd W, J6, Jrel;  ///< W = D^-1/2 U^-1 J^T (M = U D U^T)
   Eigen::Matrix3Xd plane_normal, plane_t1, plane_t2;  ///< world axes of each half-space
   Eigen::VectorXd plane_offset;
   Eigen::VectorXd tau, nle, v_free, dv, guess, q_tmp, row_velocity, zero_nv, b_scaled;
   Eigen::VectorXd frame_turn;  ///< omega x v on each free flyer's linear rows, 0 elsewhere
-  std::shared_ptr<DenseDelassus> delassus;
+  std::shared_ptr<DenseDelassus> delassus;  ///< dense problems: updated in place from step to step
   std::unique_ptr<ContactProblem> problem;
   std::vector<int> problem_active;
   std::unique_ptr<ContactSolver> solver;
   std::vector<Eigen::VectorXd> stage_v, stage_a;
-  std::vector<pinocchio::Force> forces;
+  std::vector<int> part_fill;  ///< per part: rows placed so far (contactJacobians)
+  std::vector<Eigen::Triplet<double>> triplets;  ///< the sparse A's entries, part by part
+  Eigen::VectorXd row_scratch;  ///< one value per row
 };
+
+/// The contact Jacobian J (rows x nv) of the last problem, assembled from the parts' columns.
+Eigen::MatrixXd denseJacobian(const SimulatorData& sd);
+
+/// The mass matrix M (nv x nv, symmetric) of the last step, assembled from the parts'.
+Eigen::MatrixXd denseMassMatrix(const SimulatorData& sd);
+
+/// The Delassus operator A of the last problem as a dense matrix.
+Eigen::MatrixXd denseDelassus(const SimulatorData& sd);
 
 /// Advance sim_data by one step (time stepping: exactly dt; ODE modes: one
 /// RK4 step of dt, or one accepted adaptive step of at most dt).
