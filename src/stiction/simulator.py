@@ -330,14 +330,10 @@ class Simulator:
 
     # ---- post-processing
     def contact_centers(self, traj: Trajectory) -> np.ndarray:
-        """World position of every candidate sphere centre (points: the point), (N, nc, 3)."""
-        model, data = self.scene.model, self.scene.model.createData()
-        out = np.empty((len(traj.t), len(self.scene.contacts), 3))
-        for k, q in enumerate(traj.q):
-            pin.framesForwardKinematics(model, data, q)
-            for i, c in enumerate(self.scene.contacts):
-                out[k, i] = data.oMf[c.frame].act(np.asarray(c.offset))
-        return out
+        """World position of every candidate sphere centre (points: the point), (N, nc, 3).
+        Computed part by part in C++ (a Pinocchio Data of a world of many bodies would not fit)."""
+        Q = np.atleast_2d(np.asarray(traj.q, dtype=float))
+        return np.asarray(_core.contact_centers(self.model, Q)).reshape(len(Q), len(self.scene.contacts), 3)
 
     def summary(self, traj: Trajectory) -> dict:
         """The numbers `stiction simulate --json` prints."""

@@ -378,6 +378,13 @@ void exposeSimulator() {
       (bp::arg("delta"), bp::arg("zeta") = 0.5),
       "the largest dt SimulatorModel accepts in rk4 mode: 0.75 x RK4's stability limit on eq. 64");
   bp::def("step", &doStep, (bp::arg("sim"), bp::arg("data")), "advance one step");
+  bp::def(
+      "contact_centers",
+      +[](const bp::object& sim, const bp::object& Q) {
+        return contactCenters(simArg(sim, "contact_centers"), toMatrix(Q, "contact_centers: Q"));
+      },
+      (bp::arg("sim"), bp::arg("Q")),
+      "world position of every sphere contact's centre at each configuration (a row of Q): N x (3 contacts)");
   bp::def("build_contact_problem", &doBuild,
           (bp::arg("sim"), bp::arg("data"), bp::arg("q"), bp::arg("v"), bp::arg("delta"), bp::arg("zeta")),
           "fill data.J, A, b (eq. 27), drift, position_error and active at (q, v)");

@@ -1,6 +1,8 @@
 // Stages 1 and 3: forward kinematics of every part of the world, then the rows of the active
 // contacts and anchors (J by columns of parts, the drift J' v, the position error Psi).
 #include <array>
+#include <stdexcept>
+#include <string>
 
 #include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/algorithm/jacobian.hpp>
@@ -247,4 +249,36 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
 }
 
 }  // namespace stages
+
+Eigen::MatrixXd contactCenters(const SimulatorModel& sim, const Eigen::MatrixXd& Q) {
+  if (Q.cols() != sim.model.nq)
+    throw std::invalid_argument("contact_centers: configurations need nq = " + std::to_string(sim.model.nq) +
+                                " columns, got " + std::to_string(Q.cols()));
+  std::vector<pinocchio::Data> datas;
+  std::vector<Eigen::VectorXd> zeros;
+  for (const SystemModel& part : sim.systems) {
+    datas.emplace_back(part.model);
+    zeros.push_back(Eigen::VectorXd::Zero(part.model.nv));
+  }
+  const auto nc = static_cast<Eigen::Index>(sim.contacts.size());
+  Eigen::MatrixXd out(Q.rows(), 3 * nc);
+  Eigen::VectorXd q, q_s;
+  for (Eigen::Index k = 0; k < Q.rows(); ++k) {
+    q = Q.row(k).transpose();
+    for (std::size_t s = 0; s < sim.systems.size(); ++s) {
+      stages::gatherQ(sim.systems[s], q, q_s);
+      pinocchio::forwardKinematics(sim.systems[s].model, datas[s], q_s, zeros[s], zeros[s]);
+    }
+    for (Eigen::Index i = 0; i < nc; ++i) {
+      const SphereContact& c = sim.contacts[i];
+      const pinocchio::Frame& f = sim.model.frames[c.frame];
+      const pinocchio::JointIndex j = f.parentJoint;
+      const Eigen::Vector3d center = f.placement.act(c.offset);
+      out.block<1, 3>(k, 3 * i) =
+          (j == 0 ? center : datas[sim.joint_system[j]].oMi[sim.joint_local[j]].act(center)).transpose();
+    }
+  }
+  return out;
+}
+
 }  // namespace stiction

@@ -258,6 +258,10 @@ Eigen::MatrixXd denseJacobian(const SimulatorData& sd);
 /// The mass matrix M (nv x nv, symmetric) of the last step, assembled from the parts'.
 Eigen::MatrixXd denseMassMatrix(const SimulatorData& sd);
 
+/// The world position of every sphere contact's centre (a point contact: the point) at each
+/// configuration, a row of Q (N x nq): N x (3 contacts), x, y, z per contact. No world Data.
+Eigen::MatrixXd contactCenters(const SimulatorModel& sim, const Eigen::MatrixXd& Q);
+
 /// The Delassus operator A of the last problem as a dense matrix.
 Eigen::MatrixXd denseDelassus(const SimulatorData& sd);
 
