@@ -42,7 +42,7 @@ def test_overlapping_grid_is_refused():
 
 def test_bundled_arrays_load():
     assert len(load_scene("box-tower-20").contacts) == 80
-    assert len(load_scene("cube-grid-16").contacts) == 64
+    assert len(load_scene("cube-grid-64").contacts) == 64
 
 
 def test_max_body_drift_is_the_slide_distance_of_a_sliding_cube():

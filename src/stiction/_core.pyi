@@ -276,6 +276,9 @@ class SimulatorData:
     def nle(self) -> numpy.ndarray: ...
 
     @property
+    def parts(self) -> int: ...
+
+    @property
     def position_error(self) -> numpy.ndarray: ...
 
     q: numpy.ndarray
@@ -288,6 +291,9 @@ class SimulatorData:
 
     @property
     def rows(self) -> numpy.ndarray: ...
+
+    @property
+    def sparse(self) -> bool: ...
 
     @property
     def states(self) -> list: ...
@@ -489,6 +495,9 @@ def batch_rollout(sims: Any, datas: Any, n_steps: int, record_every: int = ..., 
 
 def build_contact_problem(sim: SimulatorModel, data: SimulatorData, q: numpy.typing.ArrayLike, v: numpy.typing.ArrayLike, delta: float, zeta: float) -> None:
     """fill data.J, A, b (eq. 27), drift, position_error and active at (q, v)"""
+
+def contact_centers(sim: SimulatorModel, Q: Any) -> numpy.ndarray:
+    """world position of every sphere contact's centre at each configuration (a row of Q): N x (3 contacts)"""
 
 def exact_law_measures(problem: ContactProblem, lam: numpy.typing.ArrayLike, relative_speed_floor: float = ...) -> ExactLawMeasures:
     """How far lam is from the exact Coulomb law, part by part (ExactLawMeasures): natural map, primal and dual feasibility, complementarity, Signorini, maximum dissipation and lift-off of sliding blocks."""

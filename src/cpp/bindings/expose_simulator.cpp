@@ -367,7 +367,11 @@ void exposeSimulator() {
       .def_readonly("last_dt", &SimulatorData::last_dt)
       .def_readonly("iterations_step", &SimulatorData::iterations_step)
       .def_readonly("max_residual_step", &SimulatorData::max_residual_step)
-      .def_readonly("all_converged_step", &SimulatorData::all_converged_step);
+      .def_readonly("all_converged_step", &SimulatorData::all_converged_step)
+      .def_readonly("sparse", &SimulatorData::sparse,
+                    "True when the last problem's Delassus operator was assembled sparse (many parts, > 384 rows)")
+      .add_property("parts", +[](const SimulatorData& d) { return static_cast<long>(d.parts.size()); },
+                    "the number of parts of the world (subtrees of the universe, each its own Model and Data)");
   bp::def(
       "rk4_stable_step",
       +[](const bp::object& delta, const bp::object& zeta) {
