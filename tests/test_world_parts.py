@@ -123,3 +123,49 @@ def test_contact_centers_match_pinocchio():
             assert np.allclose(centers[k, i], data.oMf[c.frame].act(np.asarray(c.offset)), atol=1e-14)
     with pytest.raises(ValueError, match="nq"):
         _core.contact_centers(sim.model, np.zeros((2, 3)))
+
+
+def test_ur5_pushes_a_free_crate():
+    """A robot and a free body in one world (two parts coupled by the tool-face contact): the crate
+    slides 10-20 cm along +x, stays on the floor (no corner lifts more than a rocking of 3 mm), the
+    face contact pushes (positive normal force) and A couples the face and floor contacts."""
+    from stiction.scene import load_scene as load
+
+    sim = Simulator(load("ur5-push-box"))
+    assert sim.data.parts == 2
+    traj = sim.rollout(sim.scene.duration)
+    s = sim.summary(traj)
+    assert s["all_converged"] and s["max_residual"] <= 1e-10
+    crate = traj.q[:, 6:9]  # the crate's position (after the UR5's 6 joints)
+    assert 0.10 <= crate[-1, 0] - crate[0, 0] <= 0.20
+    assert abs(crate[-1, 1] - crate[0, 1]) < 0.01
+    assert np.abs(crate[:, 2] - 0.15).max() < 3e-3
+    assert np.abs(traj.v[-1, 6:]).max() < 1e-4 and np.abs(traj.v[-1]).max() < 1e-3  # at rest against the arm
+    face = [i for i, c in enumerate(sim.scene.contacts) if c.name.startswith("tool0")]
+    assert len(face) == 1
+    assert traj.lam[:, face[0], 2].max() > 1.0  # newtons, pushing
+    sim2 = Simulator(load("ur5-push-box"))
+    sim2.set_state(q=traj.q[200], v=traj.v[200])
+    sim2.step()
+    names = [sim2.scene.contacts[i].name for i in sim2.data.active]
+    assert any(n.startswith("tool0") for n in names) and any(n.startswith("crate") for n in names)
+    A, rows = np.asarray(sim2.data.A), np.cumsum([0] + [3] * len(names))
+    k = next(i for i, n in enumerate(names) if n.startswith("tool0"))
+    others = np.concatenate([np.arange(rows[i], rows[i + 1]) for i in range(len(names)) if i != k])
+    assert np.abs(A[rows[k]:rows[k + 1]][:, others]).max() > 1e-3  # the crate couples the arm and the floor
+
+
+def test_objects_are_checked():
+    from stiction.scene import build_scene
+    from stiction.scene_schema import SceneError
+
+    base = {"robot": "ur5", "contacts": {"feet": False}, "objects": [{"name": "crate", "urdf": "crate.urdf",
+                                                                       "xy": [0.8, 0.0]}]}
+    with pytest.raises(SceneError, match="walls\\[0\\].body = 'crat'.*crate"):
+        build_scene({**base, "walls": [{"body": "crat", "normal": [-1, 0, 0], "offset": 0.15, "frames": ["tool0"]}]})
+    with pytest.raises(SceneError, match="objects: free boxes are added to `robot` or `urdf` scenes"):
+        build_scene({"array": {"layout": "grid", "count": 2}, "objects": [{"name": "a", "xy": [0, 0]}]})
+    with pytest.raises(SceneError, match="unique"):
+        build_scene({**base, "objects": base["objects"] * 2})
+    sc = build_scene(base)
+    assert sc.model.nq == 6 + 7 and np.all(sc.kp[6:] == 0) and np.all(sc.tau_ff[6:] == 0)

@@ -273,9 +273,28 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             paths = cfg["bodies"] if cfg["bodies"] is not None else [cfg["array"]["urdf"]] * cfg["array"]["count"]
             model, visual, q0, contacts, halfspaces = _stacked_bodies(paths, mu, halfspaces, base_dir, cmodel)
 
+    # Free boxes beside the robot: appended after its joints (each its own part of the world).
+    robot_nq, robot_nv = model.nq, model.nv
+    object_frames = {}
+    for k, obj in enumerate(cfg["objects"]):
+        model, visual, frame, half = _append_box(model, visual, obj["urdf"], obj["name"], base_dir,
+                                                 f"objects[{k}].urdf")
+        object_frames[obj["name"]] = frame
+        obj_mu = mu if obj["mu"] is None else obj["mu"]
+        for c, corner in enumerate(_corners(half, z_sign=-1)):
+            contacts.append(_sphere(f"{obj['name']}-corner{c}", frame, corner, 0.0, 0, obj_mu, cmodel))
+        q0 = np.concatenate([q0, [obj["xy"][0], obj["xy"][1], float(half[2]), 0.0, 0.0, 0.0, 1.0]])
+
     for w, wall in enumerate(cfg["walls"]):
         name = wall["name"] or f"wall{len(halfspaces)}"
-        halfspaces.append(_halfspace(name, wall["normal"], wall["offset"]))
+        wall_frame = 0
+        if wall["body"] is not None:
+            if wall["body"] not in object_frames:
+                hint = did_you_mean(wall["body"], list(object_frames))
+                raise SceneError(f"walls[{w}].body = {wall['body']!r}: no such object ({hint}objects: "
+                                 f"{', '.join(object_frames) or 'none'})")
+            wall_frame = object_frames[wall["body"]]
+        halfspaces.append(_halfspace(name, wall["normal"], wall["offset"], wall_frame))
         for frame_name in wall["frames"]:
             fid = _frame_id(model, frame_name, f"walls[{w}].frames")
             contacts.append(_sphere(f"{frame_name}-{name}", fid, wall["offset_in_frame"], wall["radius"],
@@ -363,19 +382,20 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
     kd = np.zeros(model.nv)
     start = 6 if free else 3 if planar else 0
     root_nq = 7 if free else 4 if planar else 0
-    kp[start:] = control["kp"]
-    kd[start:] = control["kd"]
+    kp[start:robot_nv] = control["kp"]  # the robot's joints (objects are not actuated)
+    kd[start:robot_nv] = control["kd"]
     q_target = q0.copy()
     if control["q_target"] is not None:
         joints = np.asarray(control["q_target"], dtype=float)
-        if joints.shape != (model.nq - root_nq,):
-            raise SceneError(f"control.q_target needs the {model.nq - root_nq} joint positions, "
+        if joints.shape != (robot_nq - root_nq,):
+            raise SceneError(f"control.q_target needs the {robot_nq - root_nq} joint positions, "
                              f"got {joints.shape[0]}")
-        q_target[root_nq:] = joints
+        q_target[root_nq:robot_nq] = joints
     tau_ff = np.zeros(model.nv)
     if control["gravity_feedforward"]:
         tau_ff = pin.computeGeneralizedGravity(model, model.createData(), q_target).copy()
         tau_ff[:start] = 0.0
+        tau_ff[robot_nv:] = 0.0
 
     return Scene(
         name=cfg["name"] or default_name, description=cfg["description"], model=model,

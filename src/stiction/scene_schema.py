@@ -114,6 +114,18 @@ WALLS = Table("walls", "Extra fixed half-spaces {x : normal . x >= offset} and t
     Key("offset_in_frame", "vector", "sphere centre in the frame", (0.0, 0.0, 0.0), length=3),
     Key("mu", "float", "friction coefficient (default: [ground] mu)", low=0.0),
     Key("model", "str", "contact model of the wall's spheres (default: [contacts] model)", choices=CONTACT_MODELS),
+    Key("body", "str", "the name of an `[[objects]]` box carrying the half-space (normal and offset then in its "
+        "frame: a face of the box; default: fixed in the world)"),
+), array=True)
+
+OBJECTS = Table("objects", "Free boxes added to a `robot` or `urdf` scene, each a part of the world with its own "
+                "model: its four bottom corners rest on the ground; a robot touches it through a `[[walls]]` "
+                "entry with `body` = its name (a face of the box).", (
+    Key("name", "str", "the box's name (its frames are suffixed with it; `walls.body` refers to it)",
+        required=True),
+    Key("urdf", "str", "a box URDF (relative: to the scene file's folder, then the bundled robots)", "cube.urdf"),
+    Key("xy", "vector", "centre x, y in the world (the box rests on the ground)", required=True, length=2),
+    Key("mu", "float", "friction coefficient of its corners on the ground (default: [ground] mu)", low=0.0),
 ), array=True)
 
 ANCHORS = Table("anchors", "Point anchors: 3 bilateral rows each (paper §3), to the world or to another body.", (
@@ -169,7 +181,7 @@ SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `bodies` or `[a
         choices=("timestep", "rk4", "ode", "adaptive")),
     Key("delta", "float", "ODE modes: Baumgarte delta in s (0: dt)", 0.0, low=0.0),
     Key("zeta", "float", "ODE modes: Baumgarte zeta", 0.5, low=0.0, low_open=True),
-), tables=(GROUND, CONTACTS, CONTROL, INITIAL, WALLS, ANCHORS, COLLISION, ARRAY))
+), tables=(GROUND, CONTACTS, CONTROL, INITIAL, WALLS, ANCHORS, COLLISION, ARRAY, OBJECTS))
 
 
 def _where(path: str) -> str:
@@ -304,6 +316,12 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
             out["array"] = None
         elif out["array"]["layout"] == "tower" and out["array"]["spacing"] is not None:
             raise SceneError("array.spacing applies to layout = \"grid\" only")
+        if out["objects"] and out["robot"] is None and out["urdf"] is None:
+            raise SceneError("objects: free boxes are added to `robot` or `urdf` scenes (`bodies` and [array] scenes "
+                             "are boxes already)")
+        names = [o["name"] for o in out["objects"]]
+        if len(set(names)) != len(names):
+            raise SceneError(f"objects: names must be unique, got {names}")
         if out["mode"] == "timestep" and "delta" in cfg:
             raise SceneError("delta applies to the ODE modes (mode = rk4, ode or adaptive) only")
         if "joint" in cfg and "free_flyer" in cfg and (out["joint"] == "free_flyer") != out["free_flyer"]:
