@@ -369,7 +369,7 @@ void exposeSimulator() {
       .def_readonly("max_residual_step", &SimulatorData::max_residual_step)
       .def_readonly("all_converged_step", &SimulatorData::all_converged_step)
       .def_readonly("sparse", &SimulatorData::sparse,
-                    "True when the last problem's Delassus operator was assembled sparse (many parts, > 384 rows)")
+                    "True when the last problem's Delassus operator was assembled sparse (many parts, > 96 rows)")
       .add_property("parts", +[](const SimulatorData& d) { return static_cast<long>(d.parts.size()); },
                     "the number of parts of the world (subtrees of the universe, each its own Model and Data)");
   bp::def(

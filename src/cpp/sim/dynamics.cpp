@@ -102,15 +102,53 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     w.W = w.J.transpose();
     w.data.U.triangularView<Eigen::UnitUpper>().solveInPlace(w.W);
     w.W = w.data.Dinv.cwiseSqrt().asDiagonal() * w.W;
-    w.A.setZero();
-    w.A.selfadjointView<Eigen::Lower>().rankUpdate(w.W.transpose());
-    w.A.triangularView<Eigen::StrictlyUpper>() = w.A.transpose();
+    if (n <= 24) {
+      // small blocks (a free body's 4 contacts: 12 rows): a coefficient-wise product, exactly
+      // symmetric since (W^T W)_ij and _ji sum the same products in the same order
+      w.A.noalias() = w.W.transpose().lazyProduct(w.W);
+    } else {
+      w.A.setZero();
+      w.A.selfadjointView<Eigen::Lower>().rankUpdate(w.W.transpose());
+      w.A.triangularView<Eigen::StrictlyUpper>() = w.A.transpose();
+    }
     entries += n * n;
   }
   // Sparse when the parts leave most of A empty: many parts, more rows than the dense
   // solvers handle well (the default rule's threshold), at most 10 % of the entries.
   sd.sparse = sd.parts.size() > 1 && rows > kSparseDelassusRows && entries * 10 <= rows * rows;
-  if (sd.sparse) {
+  if (sd.sparse && !sd.parts_share_rows) {
+    // Every row in one part: column c of A is its part's column, rows in the part's (ascending)
+    // order; written straight into the compressed storage.
+    sd.row_part.assign(static_cast<std::size_t>(rows), -1);
+    sd.row_local.resize(static_cast<std::size_t>(rows));
+    for (std::size_t s = 0; s < sd.parts.size(); ++s)
+      for (std::size_t k = 0; k < sd.parts[s].rows.size(); ++k) {
+        sd.row_part[sd.parts[s].rows[k]] = static_cast<int>(s);
+        sd.row_local[sd.parts[s].rows[k]] = static_cast<int>(k);
+      }
+    sd.A_sparse.resize(rows, rows);
+    sd.A_sparse.resizeNonZeros(entries);
+    int* outer = sd.A_sparse.outerIndexPtr();
+    int* inner = sd.A_sparse.innerIndexPtr();
+    double* value = sd.A_sparse.valuePtr();
+    Eigen::Index pos = 0;
+    outer[0] = 0;
+    for (Eigen::Index c = 0; c < rows; ++c) {
+      const int s = sd.row_part[c];
+      if (s >= 0) {
+        const SystemWork& w = sd.parts[s];
+        const int k = sd.row_local[c];
+        for (std::size_t r = 0; r < w.rows.size(); ++r, ++pos) {
+          inner[pos] = w.rows[r];
+          value[pos] = w.A(static_cast<Eigen::Index>(r), k);
+        }
+      }
+      outer[c + 1] = static_cast<int>(pos);
+    }
+    sd.A.resize(0, 0);
+    return;
+  }
+  if (sd.sparse) {  // rows shared by two parts (contacts between bodies): their shares summed
     sd.triplets.clear();
     sd.triplets.reserve(static_cast<std::size_t>(entries));
     for (const SystemWork& w : sd.parts)
@@ -118,7 +156,7 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
         for (Eigen::Index r = 0; r < w.A.rows(); ++r)
           sd.triplets.emplace_back(w.rows[r], w.rows[c], w.A(r, c));
     sd.A_sparse.resize(rows, rows);
-    sd.A_sparse.setFromTriplets(sd.triplets.begin(), sd.triplets.end());  // sums the parts' shares
+    sd.A_sparse.setFromTriplets(sd.triplets.begin(), sd.triplets.end());
     sd.A.resize(0, 0);
     return;
   }

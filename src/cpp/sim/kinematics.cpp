@@ -60,7 +60,9 @@ std::array<int, 2> blockParts(const SimulatorModel& sim, const BlockBodies& b) {
 
 // Rows [row, row + k) of the problem belong to the parts the block touches.
 void reserveRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& b, Eigen::Index row, int k) {
-  for (int s : blockParts(sim, b))
+  const std::array<int, 2> parts = blockParts(sim, b);
+  if (parts[0] >= 0 && parts[1] >= 0) sd.parts_share_rows = true;
+  for (int s : parts)
     if (s >= 0)
       for (int r = 0; r < k; ++r) sd.parts[s].rows.push_back(static_cast<int>(row + r));
 }
@@ -123,6 +125,7 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
   const pinocchio::Model& model = sim.model;
   // Which rows each part holds (a contact between two parts: both), then the parts' J.
   for (SystemWork& w : sd.parts) w.rows.clear();
+  sd.parts_share_rows = false;
   Eigen::Index rows = 0;
   for (int i : sd.active) {
     reserveRows(sim, sd, contactBodies(sim, i), rows, sd.candidate_rows[i]);

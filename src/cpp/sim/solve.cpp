@@ -82,7 +82,8 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   };
   if (sd.sparse) {  // a new operator each step: its pattern follows the contacts
     sd.delassus.reset();
-    sd.problem = std::make_unique<ContactProblem>(std::make_shared<SparseDelassus>(sd.A_sparse), scale * sd.b,
+    sd.problem = std::make_unique<ContactProblem>(std::make_shared<SparseDelassus>(sd.A_sparse, /*symmetric=*/true),
+                                                  scale * sd.b,
                                                   constraints(), 1e-6, false);
   } else if (!sd.problem || !sd.delassus || sd.active != sd.problem_active) {
     sd.delassus = std::make_shared<DenseDelassus>(sd.A);

@@ -197,7 +197,7 @@ class SimulatorData {
   /// J (rows x nv) is held by columns of parts (SystemWork::J); denseJacobian() assembles it.
   Eigen::Index rows = 0;
   Eigen::MatrixXd A;                 ///< rows x rows, J M^-1 J^T (eq. 22), when dense
-  Eigen::SparseMatrix<double> A_sparse;  ///< the same when sparse (many parts, > 384 rows)
+  Eigen::SparseMatrix<double> A_sparse;  ///< the same when sparse (many parts, > 96 rows)
   bool sparse = false;               ///< which of A, A_sparse holds the last problem's operator
   Eigen::VectorXd b;                 ///< eq. 27 at force level
   Eigen::VectorXd drift;             ///< J' v per row
@@ -249,6 +249,8 @@ class SimulatorData {
   std::vector<Eigen::VectorXd> stage_v, stage_a;
   std::vector<int> part_fill;  ///< per part: rows placed so far (contactJacobians)
   std::vector<Eigen::Triplet<double>> triplets;  ///< the sparse A's entries, part by part
+  bool parts_share_rows = false;  ///< a contact between two parts: its rows in both
+  std::vector<int> row_part, row_local;  ///< per row: its part and local row (rows in one part each)
   Eigen::VectorXd row_scratch;  ///< one value per row
 };
 
