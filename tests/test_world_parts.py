@@ -171,3 +171,21 @@ def test_objects_are_checked():
         build_scene({**base, "objects": base["objects"] * 2})
     sc = build_scene(base)
     assert sc.model.nq == 6 + 7 and np.all(sc.kp[6:] == 0) and np.all(sc.tau_ff[6:] == 0)
+
+
+def test_solo12_stands_still_on_a_free_board():
+    """A robot standing on a free body (two parts, the feet on the board's top face, the board on
+    the ground): the board does not move, the feet do not slip on it."""
+    sim = Simulator(load_scene("solo12-on-board"))
+    assert sim.data.parts == 2
+    traj = sim.rollout(2.0)
+    s = sim.summary(traj)
+    assert s["all_converged"] and s["max_residual"] <= 1e-10
+    board = traj.q[:, 19:22]  # after Solo-12's 19 coordinates
+    assert np.abs(board - board[0]).max() < 1e-12
+    assert s["max_foot_slip"] < 1e-9
+    assert s["base_drift"] < 1e-7
+    feet = [k for k, c in enumerate(sim.scene.contacts) if c.name.endswith("board top")]
+    assert len(feet) == 4
+    weight = 9.81 * sum(i.mass for i in sim.scene.model.inertias[1:-1])  # the robot (the board is last)
+    assert abs(traj.lam[-1, feet, 2].sum() - weight) < 1e-3 * weight  # at rest the feet carry the robot
