@@ -505,6 +505,9 @@ def exact_law_measures(problem: ContactProblem, lam: numpy.typing.ArrayLike, rel
 def formulation_infos() -> list:
     """One dict per formulation: name, equations (the paper's), summary, parameters."""
 
+def joint_placements(sim: SimulatorModel, Q: Any) -> numpy.ndarray:
+    """world placement of every joint at each configuration (a row of Q): N x (12 joints), per joint the rotation (column-major) then the translation"""
+
 def residual(problem: ContactProblem, lam: numpy.typing.ArrayLike) -> float:
     """natural-map residual of the De Saxce problem / (1 + ||b||)"""
 

@@ -203,7 +203,9 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
     window = _OfflineWindow()
     vis = meshcat.Visualizer(window=window)
     root = "stiction"
-    viz = MeshcatVisualizer(model, None, scene.visual_model)
+    # An empty model's Data: the visualizer would build one for the world model (nv^3 tensors:
+    # out of memory for a world of many bodies); placements come from the simulator, part by part.
+    viz = MeshcatVisualizer(model, None, scene.visual_model, data=pin.Model().createData())
     viz.initViewer(viewer=vis)
     viz.loadViewerModel(rootNodeName=f"{root}/robot")
     # The slope is tilted gravity; tilt the picture instead so gravity points down.
@@ -230,13 +232,15 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
     centers = sim.contact_centers(traj)[idx]
     # the contacts' half-space frames (t1, t2, n) in the world: a body's face turns with it
     frames = np.empty((nf, nc, 3, 3))
-    fdata = model.createData()
+    oMi = sim.joint_placements(traj.q[idx])  # (nf, joints, 4, 4)
     for k in range(nf):
-        pin.framesForwardKinematics(model, fdata, traj.q[idx[k]])
         for i, c in enumerate(scene.contacts):
             h = sim.model.halfspaces[c.halfspace]
             B = np.column_stack([np.asarray(h.tangent1), np.asarray(h.tangent2), np.asarray(h.normal)])
-            frames[k, i] = B if h.frame == 0 else np.asarray(fdata.oMf[h.frame].rotation) @ B
+            if h.frame != 0:
+                f = model.frames[h.frame]
+                B = oMi[k, f.parentJoint, :3, :3] @ np.asarray(f.placement.rotation) @ B
+            frames[k, i] = B
     normals = frames[..., 2]
     points = centers - np.array([c.radius for c in scene.contacts])[None, :, None] * normals
     forces = np.einsum("kiab,kib->kia", frames, traj.lam[idx, :nc])
@@ -244,7 +248,7 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
     drawn = ["stick", "slip"] + (["closed"] if (states == 3).any() else [])
 
     # ---- the robot over the trajectory: poses, and its bounding box (physics frame)
-    vmodel, vdata, data = viz.visual_model, viz.visual_data, viz.data
+    vmodel = viz.visual_model
     names = [viz.getViewerNodeName(go, pin.GeometryType.VISUAL) for go in vmodel.geometryObjects]
     scales = [np.diag(go.meshScale) for go in vmodel.geometryObjects]
     corners = []
@@ -259,15 +263,14 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
             corners.append(np.zeros((1, 3)))
     poses = np.empty((nf, len(names), 4, 4))
     pts = [points.reshape(-1, 3)]
-    for frame_no, k in enumerate(idx):
-        pin.forwardKinematics(model, data, traj.q[k])
-        pin.updateGeometryPlacements(model, data, vmodel, vdata)
-        for g in range(len(names)):
-            M = vdata.oMg[g]
-            T = M.homogeneous.copy()
+    placements = [(go.parentJoint, np.asarray(go.placement.homogeneous)) for go in vmodel.geometryObjects]
+    for frame_no in range(nf):
+        for g, (joint, iMg) in enumerate(placements):
+            M = oMi[frame_no, joint] @ iMg  # the geometry in the world
+            T = M.copy()
             T[:3, :3] = T[:3, :3] @ scales[g]
             poses[frame_no, g] = T
-            pts.append(corners[g] @ np.asarray(M.rotation).T + np.asarray(M.translation))
+            pts.append(corners[g] @ M[:3, :3].T + M[:3, 3])
     pts = np.concatenate(pts)
     size = max(float(np.linalg.norm(pts.max(0) - pts.min(0))), 0.1)
 
@@ -334,7 +337,8 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
             ]
             clips.append({"path": vis[f"{root}/contacts/c{i}/{s}"].path.lower(),
                           "clip": {"fps": fps, "name": "default", "tracks": tracks}})
-    viz.display(traj.q[0])
+    for g, name in enumerate(names):  # the first pose (what viz.display(q0) would set)
+        vis[name].set_transform(poses[0, g])
     # repetitions=0 would play it zero times
     window.send(_SetAnimation(clips, play=True, repetitions=1))
 

@@ -335,6 +335,17 @@ class Simulator:
         Q = np.atleast_2d(np.asarray(traj.q, dtype=float))
         return np.asarray(_core.contact_centers(self.model, Q)).reshape(len(Q), len(self.scene.contacts), 3)
 
+    def joint_placements(self, Q) -> np.ndarray:
+        """World placement of every joint at each configuration (a row of Q), (N, njoints, 4, 4)
+        homogeneous matrices. Computed part by part in C++ (no world pinocchio.Data)."""
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        raw = np.asarray(_core.joint_placements(self.model, Q)).reshape(len(Q), self.scene.model.njoints, 4, 3)
+        out = np.zeros((len(Q), self.scene.model.njoints, 4, 4))
+        out[..., :3, :3] = raw[..., :3, :].transpose(0, 1, 3, 2)  # stored column by column
+        out[..., :3, 3] = raw[..., 3, :]
+        out[..., 3, 3] = 1.0
+        return out
+
     def summary(self, traj: Trajectory) -> dict:
         """The numbers `stiction simulate --json` prints."""
         sc = self.scene

@@ -389,6 +389,14 @@ void exposeSimulator() {
       },
       (bp::arg("sim"), bp::arg("Q")),
       "world position of every sphere contact's centre at each configuration (a row of Q): N x (3 contacts)");
+  bp::def(
+      "joint_placements",
+      +[](const bp::object& sim, const bp::object& Q) {
+        return jointPlacements(simArg(sim, "joint_placements"), toMatrix(Q, "joint_placements: Q"));
+      },
+      (bp::arg("sim"), bp::arg("Q")),
+      "world placement of every joint at each configuration (a row of Q): N x (12 joints), per joint the "
+      "rotation (column-major) then the translation");
   bp::def("build_contact_problem", &doBuild,
           (bp::arg("sim"), bp::arg("data"), bp::arg("q"), bp::arg("v"), bp::arg("delta"), bp::arg("zeta")),
           "fill data.J, A, b (eq. 27), drift, position_error and active at (q, v)");

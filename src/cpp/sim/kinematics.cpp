@@ -284,4 +284,35 @@ Eigen::MatrixXd contactCenters(const SimulatorModel& sim, const Eigen::MatrixXd&
   return out;
 }
 
+
+Eigen::MatrixXd jointPlacements(const SimulatorModel& sim, const Eigen::MatrixXd& Q) {
+  if (Q.cols() != sim.model.nq)
+    throw std::invalid_argument("joint_placements: configurations need nq = " + std::to_string(sim.model.nq) +
+                                " columns, got " + std::to_string(Q.cols()));
+  std::vector<pinocchio::Data> datas;
+  std::vector<Eigen::VectorXd> zeros;
+  for (const SystemModel& part : sim.systems) {
+    datas.emplace_back(part.model);
+    zeros.push_back(Eigen::VectorXd::Zero(part.model.nv));
+  }
+  const Eigen::Index nj = sim.model.njoints;
+  Eigen::MatrixXd out(Q.rows(), 12 * nj);
+  Eigen::VectorXd q, q_s;
+  for (Eigen::Index k = 0; k < Q.rows(); ++k) {
+    q = Q.row(k).transpose();
+    for (std::size_t s = 0; s < sim.systems.size(); ++s) {
+      stages::gatherQ(sim.systems[s], q, q_s);
+      pinocchio::forwardKinematics(sim.systems[s].model, datas[s], q_s, zeros[s], zeros[s]);
+    }
+    for (Eigen::Index j = 0; j < nj; ++j) {
+      const pinocchio::SE3 M = j == 0 ? pinocchio::SE3::Identity()
+                                      : datas[sim.joint_system[j]].oMi[sim.joint_local[j]];
+      for (int c = 0; c < 3; ++c)
+        for (int r = 0; r < 3; ++r) out(k, 12 * j + 3 * c + r) = M.rotation()(r, c);
+      for (int r = 0; r < 3; ++r) out(k, 12 * j + 9 + r) = M.translation()[r];
+    }
+  }
+  return out;
+}
+
 }  // namespace stiction

@@ -264,6 +264,11 @@ Eigen::MatrixXd denseMassMatrix(const SimulatorData& sd);
 /// configuration, a row of Q (N x nq): N x (3 contacts), x, y, z per contact. No world Data.
 Eigen::MatrixXd contactCenters(const SimulatorModel& sim, const Eigen::MatrixXd& Q);
 
+/// The world placement of every joint of the world model (joint 0: the identity) at each
+/// configuration, a row of Q: N x (12 joints), per joint the rotation (column-major) then the
+/// translation. Part by part: no world Data.
+Eigen::MatrixXd jointPlacements(const SimulatorModel& sim, const Eigen::MatrixXd& Q);
+
 /// The Delassus operator A of the last problem as a dense matrix.
 Eigen::MatrixXd denseDelassus(const SimulatorData& sd);
 
