@@ -100,7 +100,16 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     w.A.resize(n, n);
     if (n == 0) continue;
     w.W = w.J.transpose();
-    w.data.U.triangularView<Eigen::UnitUpper>().solveInPlace(w.W);
+    if (w.W.rows() <= 6) {
+      // a free body's 6 x 6 factor: back substitution by rows (Eigen's blocked triangular
+      // solve costs more than the arithmetic at this size)
+      const Eigen::MatrixXd& U = w.data.U;
+      for (Eigen::Index i = w.W.rows() - 2; i >= 0; --i)
+        for (Eigen::Index j = i + 1; j < w.W.rows(); ++j)
+          if (U(i, j) != 0.0) w.W.row(i) -= U(i, j) * w.W.row(j);
+    } else {
+      w.data.U.triangularView<Eigen::UnitUpper>().solveInPlace(w.W);
+    }
     w.W = w.data.Dinv.cwiseSqrt().asDiagonal() * w.W;
     if (n <= 12 && w.J.cols() <= 6) {
       // a free body's few contacts (a cube's 4 corners: 12 rows x 6): a coefficient-wise product,
