@@ -149,3 +149,20 @@ def test_a_warm_started_robot_step_is_one_newton_stage():
     again = stiction.solve(problem, warm_start=first.lam)
     assert again.converged and stage_names(again) == ["newton"] and again.iterations <= 1
     np.testing.assert_allclose(again.lam, first.lam, atol=1e-12 * np.abs(first.lam).max())
+
+
+def test_a_warm_started_medium_step_goes_from_a_stalled_gauss_seidel_to_admm():
+    """A tower of 20 cubes on 4 corners each (240 rows, A of rank <= 120, warm-started by the
+    simulator): Newton stalled there from the NSGS iterate and from the guess (no descent
+    direction); ADMM from the previous step's forces converges. Cold solves of the same size keep
+    NSGS then Newton (test_medium_problems_hand_a_stalled_gauss_seidel_to_newton)."""
+    from stiction.scene import load_scene
+    from stiction.simulator import Simulator
+
+    sim = Simulator(load_scene("box-tower-20"))
+    traj = sim.rollout(0.05)
+    r = sim.data.result
+    assert traj.converged[1:].all()
+    assert r.converged and 64 < len(r.lam) <= 384
+    names = stage_names(r)
+    assert names[-1] == "admm" and "newton" not in names, r.stages
