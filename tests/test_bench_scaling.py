@@ -30,3 +30,15 @@ def test_exponent_fit_is_the_log_log_slope():
 def test_contact_counts_must_be_whole_cubes(capsys):
     assert main(["bench", "scaling", "--sizes", "6", "--json"]) == 2
     assert "multiples of 4" in capsys.readouterr().err
+
+
+def test_tower_layout_stacks_the_cubes(capsys):
+    """The tower: every cube on the one below (contacts between parts), resting exactly."""
+    assert main(["bench", "scaling", "--layout", "tower", "--sizes", "4", "12", "--steps", "5", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["layout"] == "tower" and [r["scene"] for r in out["rows"]] == ["cube-tower-4", "cube-tower-12"]
+    for r in out["rows"]:
+        assert r["all_converged"] and r["max_penetration"] <= 1e-9 and r["max_body_drift"] <= 1e-9
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "scaling", "--layout", "pile", "--json"])
+    assert exc.value.code == 2 and "invalid choice: 'pile'" in capsys.readouterr().err

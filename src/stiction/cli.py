@@ -284,7 +284,7 @@ def cmd_bench(args) -> int:
         f"{r['contacts']:6d} contacts  {r['us_per_step']:10.1f} µs/step  {r['peak_memory_mb']:8.0f} MB"
         + ("" if r["mujoco_us_per_step"] is None else f"  MuJoCo {r['mujoco_us_per_step']:9.1f} µs/step"),
         flush=True))
-    result = scaling.run(sizes, steps=steps, progress=progress)
+    result = scaling.run(sizes, steps=steps, progress=progress, layout=args.layout)
     if args.plot:
         scaling.plot(result, args.plot)
     if args.json:
@@ -411,6 +411,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="4, 16, 64 contacts, 50 steps")
     p.add_argument("--sizes", type=_positive_int, nargs="+", metavar="N", help="contact counts (multiples of 4)")
     p.add_argument("--steps", type=_positive_int, default=200, help="timed steps per size (default 200)")
+    p.add_argument("--layout", choices=["grid", "tower"], default="grid",
+                   help="cubes side by side on the ground (default) or stacked")
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("solvers", help="list the solver names")

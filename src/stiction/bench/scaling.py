@@ -1,5 +1,6 @@
-"""Cost per step against contact count: a grid of free cubes on the ground (4 corner contacts each,
-1 kg, 10 cm, mu = 0.5, dt = 1 ms, time stepping, exact law to 1e-10), N = 4 ... contacts.
+"""Cost per step against contact count: a grid of free cubes on the ground, or a tower of them
+(layout "tower": each cube on the one below), 4 corner contacts each, 1 kg, 10 cm, mu = 0.5,
+dt = 1 ms, time stepping, exact law to 1e-10, N = 4 ... contacts.
 
 Each size runs in its own subprocess (so ``peak_memory_mb``, the process's peak resident memory,
 is that size's), simulates ``steps`` steps after ``warmup`` untimed ones, and reports the median
@@ -22,8 +23,8 @@ import json, resource, sys, time
 import numpy as np
 from stiction.scene import build_scene
 from stiction.simulator import Simulator
-cubes, steps, warmup = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
-sim = Simulator(build_scene({"name": f"cube-grid-{4 * cubes}", "array": {"layout": "grid", "count": cubes},
+cubes, steps, warmup, layout = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+sim = Simulator(build_scene({"name": f"cube-{layout}-{4 * cubes}", "array": {"layout": layout, "count": cubes},
                              "ground": {"mu": 0.5}}))
 sim.rollout(warmup * sim.dt)
 traj = sim.rollout(steps * sim.dt)
@@ -34,25 +35,31 @@ print(json.dumps({"us_per_step": float(np.median(traj.timings[1:, 4])), "all_con
 """
 
 
-def mujoco_grid_xml(cubes: int, spacing: float = 0.2) -> str:
+LAYOUTS = ("grid", "tower")
+
+
+def mujoco_grid_xml(cubes: int, spacing: float = 0.2, layout: str = "grid") -> str:
     per_row = math.ceil(math.sqrt(cubes))
     rows = math.ceil(cubes / per_row)
     bodies = []
     for k in range(cubes):
-        i, j = divmod(k, per_row)
-        x, y = (j - (per_row - 1) / 2) * spacing, (i - (rows - 1) / 2) * spacing
-        bodies.append(f'<body pos="{x} {y} 0.05"><freejoint/><geom type="box" size="0.05 0.05 0.05" mass="1"/></body>')
+        if layout == "tower":
+            x, y, z = 0.0, 0.0, 0.05 + 0.1 * k
+        else:
+            i, j = divmod(k, per_row)
+            x, y, z = (j - (per_row - 1) / 2) * spacing, (i - (rows - 1) / 2) * spacing, 0.05
+        bodies.append(f'<body pos="{x} {y} {z}"><freejoint/><geom type="box" size="0.05 0.05 0.05" mass="1"/></body>')
     return f"""<mujoco><option timestep="0.001" cone="elliptic" solver="Newton" tolerance="1e-10" iterations="100"/>
 <default><geom friction="0.5 0 0" condim="3"/></default>
 <worldbody><geom type="plane" size="10 10 0.1"/>{''.join(bodies)}</worldbody></mujoco>"""
 
 
-def mujoco_us_per_step(cubes: int, steps: int, warmup: int) -> float | None:
+def mujoco_us_per_step(cubes: int, steps: int, warmup: int, layout: str = "grid") -> float | None:
     try:
         import mujoco
     except ImportError:
         return None
-    model = mujoco.MjModel.from_xml_string(mujoco_grid_xml(cubes))
+    model = mujoco.MjModel.from_xml_string(mujoco_grid_xml(cubes, layout=layout))
     data = mujoco.MjData(model)
     for _ in range(warmup):
         mujoco.mj_step(model, data)
@@ -77,27 +84,30 @@ def fit_exponent(contacts: list[int], us: list[float]) -> float | None:
     return sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx if sxx > 0 else None
 
 
-def run(sizes: list[int], steps: int = 200, warmup: int = 20, progress=None) -> dict:
-    """sizes: contact counts (multiples of 4). Returns {"command", "rows", "exponent", "mujoco_exponent"}."""
+def run(sizes: list[int], steps: int = 200, warmup: int = 20, progress=None, layout: str = "grid") -> dict:
+    """sizes: contact counts (multiples of 4); layout: "grid" or "tower". Returns {"command", "layout",
+    "rows", "exponent", "mujoco_exponent"}."""
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
     rows = []
     for contacts in sizes:
         if contacts < 4 or contacts % 4:
             raise ValueError(f"contact counts must be positive multiples of 4 (4 corners per cube), got {contacts}")
         cubes = contacts // 4
-        out = subprocess.run([sys.executable, "-c", MEASURE, str(cubes), str(steps), str(warmup)],
+        out = subprocess.run([sys.executable, "-c", MEASURE, str(cubes), str(steps), str(warmup), layout],
                              capture_output=True, text=True)
         if out.returncode != 0:
-            raise RuntimeError(f"cube grid of {contacts} contacts failed: {out.stderr.strip().splitlines()[-1:]}")
+            raise RuntimeError(f"cube {layout} of {contacts} contacts failed: {out.stderr.strip().splitlines()[-1:]}")
         m = json.loads(out.stdout.strip().splitlines()[-1])
-        row = {"scene": f"cube-grid-{contacts}", "contacts": contacts, "us_per_step": m["us_per_step"],
+        row = {"scene": f"cube-{layout}-{contacts}", "contacts": contacts, "us_per_step": m["us_per_step"],
                "us_per_contact": m["us_per_step"] / contacts, "peak_memory_mb": m["peak_memory_mb"],
-               "mujoco_us_per_step": mujoco_us_per_step(cubes, steps, warmup),
+               "mujoco_us_per_step": mujoco_us_per_step(cubes, steps, warmup, layout),
                "all_converged": m["all_converged"], "max_penetration": m["max_penetration"],
                "max_body_drift": m["max_body_drift"]}
         rows.append(row)
         if progress:
             progress(row)
-    result = {"command": "stiction bench scaling", "rows": rows,
+    result = {"command": "stiction bench scaling", "layout": layout, "rows": rows,
               "exponent": fit_exponent([r["contacts"] for r in rows], [r["us_per_step"] for r in rows])}
     mj = [r["mujoco_us_per_step"] for r in rows]
     result["mujoco_exponent"] = fit_exponent([r["contacts"] for r in rows], mj) if all(mj) else None
@@ -120,7 +130,7 @@ def plot(result: dict, path: str) -> None:
     if result.get("mujoco_exponent") is not None:
         ax.loglog(n, [r["mujoco_us_per_step"] for r in rows], "s--",
                   label=f"MuJoCo 4.0 (exponent {result['mujoco_exponent']:.2f})")
-    ax.set_xlabel("contacts (cube grid, 4 per cube)")
+    ax.set_xlabel(f"contacts (cube {result.get('layout', 'grid')}, 4 per cube)")
     ax.set_ylabel("µs per step (median)")
     ax.set_title("Cost per step against contact count")
     ax.grid(True, which="both", alpha=0.3)
