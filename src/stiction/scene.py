@@ -275,10 +275,13 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
 
     # Free boxes beside the robot: appended after its joints (each its own part of the world).
     robot_nq, robot_nv = model.nq, model.nv
-    object_frames = {}
+    object_frames, cache = {}, {}
+    if cfg["objects"]:  # appended in place: to copies (the robot's models stay as loaded)
+        model = model.copy()
+        visual = visual.copy() if visual is not None else pin.GeometryModel()
     for k, obj in enumerate(cfg["objects"]):
         model, visual, frame, half = _append_box(model, visual, obj["urdf"], obj["name"], base_dir,
-                                                 f"objects[{k}].urdf")
+                                                 f"objects[{k}].urdf", cache)
         object_frames[obj["name"]] = frame
         obj_mu = mu if obj["mu"] is None else obj["mu"]
         for c, corner in enumerate(_corners(half, z_sign=-1)):
@@ -532,23 +535,44 @@ def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = 
                  slope_deg=slope_deg, mu=mu, geometry=geometry, pairs=pair_list)
 
 
-def _append_box(model, visual, path: str, k: int, base_dir, label: str):
-    """Box URDF number k appended to (model, visual) as a free body with names suffixed _k; returns
-    the new model, visual, the body's frame and its half extents."""
+def _load_box(path: str, base_dir, label: str):
+    """A box URDF as a free body: (model, visual model, half extents)."""
     urdf = _resolve(path, base_dir)
-    body = load_urdf(urdf, True, _package_dirs(urdf), name=f"body{k}")
+    body = load_urdf(urdf, True, _package_dirs(urdf), name="body")
     half = _box_half_extents(body.visual_model)
     if half is None:
         raise SceneError(f"{label} = {path!r}: the bodies must be boxes (a URDF with a box visual)")
-    for f in body.model.frames:  # prefix names so several copies can coexist
-        f.name = f"{f.name}_{k}" if f.name != "universe" else f.name
-    names = list(body.model.names)
-    for j in range(1, len(names)):
-        body.model.names[j] = f"{names[j]}_{k}"
-    for go in body.visual_model.geometryObjects:
-        go.name = f"{go.name}_{k}"
-    model, visual = pin.appendModel(model, body.model, visual, body.visual_model, 0, pin.SE3.Identity())
-    body_frame = max(i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY)
+    return body.model, body.visual_model, half
+
+
+def _append_box(model, visual, path: str, k, base_dir, label: str, cache: dict | None = None):
+    """Box URDF number k appended to (model, visual) as a free body with names suffixed _k; returns
+    the model, visual, the body's frame and its half extents. The URDF is read once per `cache`;
+    its joints, frames and visuals are added to `model` in place (pin.appendModel copies the
+    whole model each time: 3 s for 256 cubes)."""
+    cache = {} if cache is None else cache
+    if path not in cache:
+        cache[path] = _load_box(path, base_dir, label)
+    body, body_visual, half = cache[path]
+    joints = {0: 0}
+    for j in range(1, body.njoints):
+        joints[j] = model.addJoint(joints[body.parents[j]], body.joints[j], body.jointPlacements[j],
+                                   f"{body.names[j]}_{k}")
+        model.appendBodyToJoint(joints[j], body.inertias[j], pin.SE3.Identity())
+    frames = {0: 0}
+    body_frame = None
+    for i in range(1, body.nframes):
+        f = body.frames[i]
+        frames[i] = model.addFrame(pin.Frame(f"{f.name}_{k}", joints[f.parentJoint], frames[f.parentFrame],
+                                             f.placement, f.type, f.inertia), False)  # inertia: appended above
+        if f.type == pin.FrameType.BODY:
+            body_frame = frames[i]
+    for go in body_visual.geometryObjects:
+        copy = go.copy()
+        copy.name = f"{go.name}_{k}"
+        copy.parentJoint = joints[go.parentJoint]
+        copy.parentFrame = frames[go.parentFrame]
+        visual.addGeometryObject(copy)
     return model, visual, body_frame, half
 
 
@@ -556,11 +580,11 @@ def _grid_bodies(path: str, count: int, spacing: float | None, mu: float, base_d
     """`count` free boxes side by side on the ground, in rows of ceil(sqrt(count)), centred on the
     origin; each box's four bottom corners touch the ground."""
     model, visual = pin.Model(), pin.GeometryModel()
-    contacts, q_parts = [], []
+    contacts, q_parts, cache = [], [], {}
     per_row = math.ceil(math.sqrt(count))
     rows = math.ceil(count / per_row)
     for k in range(count):
-        model, visual, frame, half = _append_box(model, visual, path, k, base_dir, "array.urdf")
+        model, visual, frame, half = _append_box(model, visual, path, k, base_dir, "array.urdf", cache)
         step = spacing if spacing is not None else 4.0 * float(max(half[0], half[1]))
         if spacing is not None and spacing <= 2.0 * float(max(half[0], half[1])):
             raise SceneError(f"array.spacing = {spacing:g}: the boxes would overlap (their width is "
@@ -583,8 +607,9 @@ def _stacked_bodies(paths: list[str], mu: float, halfspaces: list, base_dir=None
     z = 0.0
     below_frame = None
     below_half = None
+    cache = {}
     for k, path in enumerate(paths):
-        model, visual, body_frame, half = _append_box(model, visual, path, k, base_dir, f"bodies[{k}]")
+        model, visual, body_frame, half = _append_box(model, visual, path, k, base_dir, f"bodies[{k}]", cache)
         if below_frame is None:
             target = 0
         else:
