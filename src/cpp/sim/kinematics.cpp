@@ -253,60 +253,64 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
 
 }  // namespace stages
 
-Eigen::MatrixXd contactCenters(const SimulatorModel& sim, const Eigen::MatrixXd& Q) {
-  if (Q.cols() != sim.model.nq)
-    throw std::invalid_argument("contact_centers: configurations need nq = " + std::to_string(sim.model.nq) +
-                                " columns, got " + std::to_string(Q.cols()));
-  std::vector<pinocchio::Data> datas;
-  std::vector<Eigen::VectorXd> zeros;
-  for (const SystemModel& part : sim.systems) {
-    datas.emplace_back(part.model);
-    zeros.push_back(Eigen::VectorXd::Zero(part.model.nv));
+namespace {
+
+// Placements of every part at configurations given one at a time: a Data per part (no world
+// Data), forward kinematics only.
+class PartPlacements {
+ public:
+  PartPlacements(const SimulatorModel& sim, const Eigen::MatrixXd& Q, const char* fn) : sim_(sim) {
+    if (Q.cols() != sim.model.nq)
+      throw std::invalid_argument(std::string(fn) + ": configurations need nq = " + std::to_string(sim.model.nq) +
+                                  " columns, got " + std::to_string(Q.cols()));
+    for (const SystemModel& part : sim.systems) {
+      datas_.emplace_back(part.model);
+      zeros_.push_back(Eigen::VectorXd::Zero(part.model.nv));
+    }
   }
+  void update(const Eigen::VectorXd& q) {
+    for (std::size_t s = 0; s < sim_.systems.size(); ++s) {
+      stages::gatherQ(sim_.systems[s], q, q_s_);
+      pinocchio::forwardKinematics(sim_.systems[s].model, datas_[s], q_s_, zeros_[s], zeros_[s]);
+    }
+  }
+  /// The world placement of world joint j at the last update (the identity for the universe).
+  pinocchio::SE3 joint(pinocchio::JointIndex j) const {
+    return j == 0 ? pinocchio::SE3::Identity() : datas_[sim_.joint_system[j]].oMi[sim_.joint_local[j]];
+  }
+
+ private:
+  const SimulatorModel& sim_;
+  std::vector<pinocchio::Data> datas_;
+  std::vector<Eigen::VectorXd> zeros_;
+  Eigen::VectorXd q_s_;
+};
+
+}  // namespace
+
+Eigen::MatrixXd contactCenters(const SimulatorModel& sim, const Eigen::MatrixXd& Q) {
+  PartPlacements placements(sim, Q, "contact_centers");
   const auto nc = static_cast<Eigen::Index>(sim.contacts.size());
   Eigen::MatrixXd out(Q.rows(), 3 * nc);
-  Eigen::VectorXd q, q_s;
   for (Eigen::Index k = 0; k < Q.rows(); ++k) {
-    q = Q.row(k).transpose();
-    for (std::size_t s = 0; s < sim.systems.size(); ++s) {
-      stages::gatherQ(sim.systems[s], q, q_s);
-      pinocchio::forwardKinematics(sim.systems[s].model, datas[s], q_s, zeros[s], zeros[s]);
-    }
+    placements.update(Q.row(k).transpose());
     for (Eigen::Index i = 0; i < nc; ++i) {
       const SphereContact& c = sim.contacts[i];
       const pinocchio::Frame& f = sim.model.frames[c.frame];
-      const pinocchio::JointIndex j = f.parentJoint;
-      const Eigen::Vector3d center = f.placement.act(c.offset);
-      out.block<1, 3>(k, 3 * i) =
-          (j == 0 ? center : datas[sim.joint_system[j]].oMi[sim.joint_local[j]].act(center)).transpose();
+      out.block<1, 3>(k, 3 * i) = placements.joint(f.parentJoint).act(f.placement.act(c.offset)).transpose();
     }
   }
   return out;
 }
 
-
 Eigen::MatrixXd jointPlacements(const SimulatorModel& sim, const Eigen::MatrixXd& Q) {
-  if (Q.cols() != sim.model.nq)
-    throw std::invalid_argument("joint_placements: configurations need nq = " + std::to_string(sim.model.nq) +
-                                " columns, got " + std::to_string(Q.cols()));
-  std::vector<pinocchio::Data> datas;
-  std::vector<Eigen::VectorXd> zeros;
-  for (const SystemModel& part : sim.systems) {
-    datas.emplace_back(part.model);
-    zeros.push_back(Eigen::VectorXd::Zero(part.model.nv));
-  }
+  PartPlacements placements(sim, Q, "joint_placements");
   const Eigen::Index nj = sim.model.njoints;
   Eigen::MatrixXd out(Q.rows(), 12 * nj);
-  Eigen::VectorXd q, q_s;
   for (Eigen::Index k = 0; k < Q.rows(); ++k) {
-    q = Q.row(k).transpose();
-    for (std::size_t s = 0; s < sim.systems.size(); ++s) {
-      stages::gatherQ(sim.systems[s], q, q_s);
-      pinocchio::forwardKinematics(sim.systems[s].model, datas[s], q_s, zeros[s], zeros[s]);
-    }
+    placements.update(Q.row(k).transpose());
     for (Eigen::Index j = 0; j < nj; ++j) {
-      const pinocchio::SE3 M = j == 0 ? pinocchio::SE3::Identity()
-                                      : datas[sim.joint_system[j]].oMi[sim.joint_local[j]];
+      const pinocchio::SE3 M = placements.joint(static_cast<pinocchio::JointIndex>(j));
       for (int c = 0; c < 3; ++c)
         for (int r = 0; r < 3; ++r) out(k, 12 * j + 3 * c + r) = M.rotation()(r, c);
       for (int r = 0; r < 3; ++r) out(k, 12 * j + 9 + r) = M.translation()[r];

@@ -82,26 +82,25 @@ constexpr Eigen::Index kSparseDelassusRows = 96;
 
 // ---- the world's parts (SimulatorModel::systems, SimulatorData::parts)
 
-/// local = the part's entries of the world vector x (velocity coordinates).
-inline void gatherV(const SystemModel& s, const Eigen::VectorXd& x, Eigen::VectorXd& local) {
-  const auto n = static_cast<Eigen::Index>(s.v_index.size());
-  if (s.v_start >= 0) {
-    local = x.segment(s.v_start, n);
+/// local = the entries `index` of x (contiguous from `start` when start >= 0).
+inline void gather(const std::vector<int>& index, int start, const Eigen::VectorXd& x, Eigen::VectorXd& local) {
+  const auto n = static_cast<Eigen::Index>(index.size());
+  if (start >= 0) {
+    local = x.segment(start, n);
     return;
   }
   local.resize(n);
-  for (Eigen::Index k = 0; k < n; ++k) local[k] = x[s.v_index[k]];
+  for (Eigen::Index k = 0; k < n; ++k) local[k] = x[index[k]];
+}
+
+/// local = the part's entries of the world vector x (velocity coordinates).
+inline void gatherV(const SystemModel& s, const Eigen::VectorXd& x, Eigen::VectorXd& local) {
+  gather(s.v_index, s.v_start, x, local);
 }
 
 /// local = the part's entries of the world configuration q.
 inline void gatherQ(const SystemModel& s, const Eigen::VectorXd& q, Eigen::VectorXd& local) {
-  const auto n = static_cast<Eigen::Index>(s.q_index.size());
-  if (s.q_start >= 0) {
-    local = q.segment(s.q_start, n);
-    return;
-  }
-  local.resize(n);
-  for (Eigen::Index k = 0; k < n; ++k) local[k] = q[s.q_index[k]];
+  gather(s.q_index, s.q_start, q, local);
 }
 
 /// The part's entries of the world vector x = local.
