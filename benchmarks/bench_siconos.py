@@ -1,0 +1,220 @@
+#!/usr/bin/env python
+"""Benchmark: stiction's default solver against Siconos 4.4 (NSGS, NSN Alart-Curnier, PROX) on the
+bundled FCLib problems, every answer judged by one measure.
+
+    python benchmarks/bench_siconos.py [--tol 1e-8] [--out docs/siconos-table.md] [--only NAME ...]
+
+Siconos is Debian's ``python3-siconos`` (with ``python3-scipy``), a system Python package: it is run
+by ``/usr/bin/python3`` (``--siconos-python``) in a subprocess per (problem, solver), which times
+its own solve call; stiction runs in this process. Without Siconos the script says so and exits 0.
+
+Problems: Siconos reads the ``.dat`` files itself (its sparse-block storage); the FCLib HDF5 files
+(which its Python build cannot read) are handed over as W (scipy CSR when at most 10 % nonzero,
+else dense), q and mu in Siconos' (n, t1, t2) order. Measure: the relative natural-map residual of
+the De Saxce problem on the W as stored (||lambda - P_K(lambda - (u + E s(u)))|| / ||q||, Siconos'
+own scaling), computed here by stiction for every solver's answer; "solved" means <= 1e-8 by that
+measure, whatever the solver claims. Time: the median over repeats (until 0.5 s are spent) of the
+solve's own time (stiction: ``result.seconds``, the C++ solve and its verdict; Siconos: its
+``fc3d_driver`` call timed in its process); at most ``--time-limit`` seconds per solve (Siconos: the subprocess is
+stopped). Settings: tolerance ``--tol`` for every solver, 10,000 iterations (NSN-AC: 1,000).
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import stiction
+from stiction import _core, fclib
+
+ROOT = Path(__file__).resolve().parents[1]
+SOLVERS = {"NSGS": "SICONOS_FRICTION_3D_NSGS", "NSN-AC": "SICONOS_FRICTION_3D_NSN_AC",
+           "PROX": "SICONOS_FRICTION_3D_PROX"}
+
+WORKER = r"""
+import json, statistics, sys, time
+import numpy as np
+import siconos.numerics as sn
+spec = json.loads(sys.argv[1])
+if spec["dat"]:
+    problem = sn.frictionContact_new_from_filename(spec["dat"])
+else:
+    data = np.load(spec["npz"])
+    W = data["W"]
+    if spec["sparse"]:
+        import scipy.sparse as sp
+        W = sp.csr_matrix(W)
+    problem = sn.FrictionContactProblem(3, W, data["q"], data["mu"])
+n = 3 * problem.numberOfContacts
+times, out = [], None
+while True:
+    so = sn.SolverOptions(getattr(sn, spec["solver_id"]))
+    so.iparam[sn.SICONOS_IPARAM_MAX_ITER] = spec["max_iter"]
+    so.dparam[sn.SICONOS_DPARAM_TOL] = spec["tol"]
+    r, u = np.zeros(n), np.zeros(n)
+    t0 = time.perf_counter()
+    info = sn.fc3d_driver(problem, r, u, so)
+    times.append(time.perf_counter() - t0)
+    out = {"r": r.tolist(), "info": int(info), "own_error": float(so.dparam[sn.SICONOS_DPARAM_RESIDU]),
+           "iterations": int(so.iparam[sn.SICONOS_IPARAM_ITER_DONE])}
+    if sum(times) > 0.5 or len(times) >= 5:
+        break
+out["seconds"] = statistics.median(times)
+print(json.dumps(out))
+"""
+
+
+def relative_residual(problem, lam, b) -> float:
+    """Natural map / ||q|| on the stored W (stiction's residual is natural map / (1 + ||b||))."""
+    nb = float(np.linalg.norm(b))
+    return float(_core.residual(problem, lam)) * (1.0 + nb) / nb if nb > 0 else float(_core.residual(problem, lam))
+
+
+def run_stiction(problem, tol, time_limit):
+    # the solve's own C++ time (result.seconds), as Siconos' is its driver call's: without the
+    # ~3 us of the Python wrapper, which matter on the 3-15-row Rover problems
+    times, wall, res = [], 0.0, None
+    while True:
+        t0 = time.perf_counter()
+        res = stiction.solve(problem, tol=tol, max_iter=10000, time_limit=time_limit)
+        wall += time.perf_counter() - t0
+        times.append(res.seconds)
+        if wall > 0.5 or len(times) >= 5:
+            break
+    return statistics.median(times), res
+
+
+def run_siconos(python, path, P, solver, tol, time_limit, workdir):
+    nc = P.contacts
+    p = fclib._to_stiction_order(nc)  # ours[i] = siconos[p[i]]
+    spec = {"solver_id": SOLVERS[solver], "tol": tol, "max_iter": 1000 if solver == "NSN-AC" else 10000,
+            "dat": str(path) if path.suffix == ".dat" else None, "npz": None, "sparse": False}
+    if spec["dat"] is None:
+        inv = np.argsort(p)
+        W = P.A[np.ix_(inv, inv)]
+        npz = Path(workdir) / f"{path.stem}.npz"
+        if not npz.exists():
+            np.savez(npz, W=W, q=-P.b[inv], mu=P.mu)
+        spec["npz"], spec["sparse"] = str(npz), bool(np.count_nonzero(W) <= 0.1 * W.size)
+    try:
+        out = subprocess.run([python, "-c", WORKER, json.dumps(spec)], capture_output=True, text=True,
+                             timeout=max(5.0, 6 * time_limit))
+    except subprocess.TimeoutExpired:
+        return {"seconds": None, "failure": "time limit"}
+    if out.returncode != 0:
+        return {"seconds": None, "failure": (out.stderr.strip().splitlines() or ["crashed"])[-1][:80]}
+    rec = json.loads(out.stdout.strip().splitlines()[-1])
+    r = np.asarray(rec["r"])
+    rec["lam"] = r[p]
+    return rec
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--tol", type=float, default=1e-8)
+    ap.add_argument("--time-limit", type=float, default=20.0)
+    ap.add_argument("--out", type=Path)
+    ap.add_argument("--only", nargs="+", help="file names (or prefixes) to run")
+    ap.add_argument("--siconos-python", default="/usr/bin/python3")
+    args = ap.parse_args()
+    python = shutil.which(args.siconos_python) or args.siconos_python
+    probe = subprocess.run([python, "-c", "import siconos.numerics, scipy"], capture_output=True, text=True) \
+        if os.path.exists(python) else None
+    if probe is None or probe.returncode != 0:
+        print(f"Siconos is not importable by {args.siconos_python} (apt install python3-siconos python3-scipy); "
+              "nothing to compare", file=sys.stderr)
+        return 0
+    files = sorted(p for p in (ROOT / "benchmarks" / "fclib").iterdir() if p.suffix in (".hdf5", ".dat"))
+    if args.only:
+        files = [f for f in files if any(f.name.startswith(o) for o in args.only)]
+    rows = []
+    with tempfile.TemporaryDirectory() as workdir:
+        for path in files:
+            P = fclib.load(path)
+            problem = P.problem()
+            seconds, res = run_stiction(problem, args.tol, args.time_limit)
+            row = {"problem": path.name, "rows": 3 * P.contacts,
+                   "stiction": {"seconds": seconds, "residual": relative_residual(problem, np.asarray(res.lam), P.b),
+                                "claimed": bool(res.converged)}}
+            for solver in SOLVERS:
+                rec = run_siconos(python, path, P, solver, args.tol, args.time_limit, workdir)
+                if rec.get("seconds") is None:
+                    row[solver] = {"seconds": None, "residual": None, "claimed": False, "failure": rec["failure"]}
+                else:
+                    row[solver] = {"seconds": rec["seconds"], "residual": relative_residual(problem, rec["lam"], P.b),
+                                   "claimed": rec["info"] == 0, "iterations": rec["iterations"]}
+            rows.append(row)
+            cells = "  ".join(
+                f"{k} {v['seconds'] * 1e3 if v['seconds'] is not None else float('nan'):9.2f} ms "
+                f"{v['residual'] if v['residual'] is not None else float('nan'):8.1e}"
+                for k, v in row.items() if isinstance(v, dict))
+            print(f"{path.name[:44]:44s} {cells}", file=sys.stderr, flush=True)
+    text = markdown(rows, args.tol)
+    if args.out:
+        args.out.write_text(text)
+    print(text)
+    return 0
+
+
+def solved(v, tol=1e-8) -> bool:
+    return v["residual"] is not None and v["residual"] <= tol
+
+
+def markdown(rows, tol) -> str:
+    cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")
+    names = ["stiction"] + list(SOLVERS)
+    lines = [
+        f"Measured {datetime.date.today()} on {platform.machine()} ({cpu}), stiction {stiction.__version__} "
+        f"(default solver) against Siconos 4.4 (Debian python3-siconos), tolerance {tol:g} for every solver; "
+        "`python benchmarks/bench_siconos.py`. Cell: median ms / relative residual on the stored W "
+        "(computed by stiction for every answer); **bold**: solved (<= 1e-8); ✗: the solver claimed "
+        "convergence without it.",
+        "",
+        "| problem | rows | " + " | ".join(names) + " | stiction / best solving Siconos |",
+        "|---|---:|" + "---|" * len(names) + "---:|",
+    ]
+    ratios, wins, false_claims = [], 0, {n: 0 for n in names}
+    for r in rows:
+        cells = []
+        for n in names:
+            v = r[n]
+            if v["seconds"] is None:
+                cells.append(v.get("failure", "—"))
+                continue
+            txt = f"{v['seconds'] * 1e3:,.2f} / {v['residual']:.1e}"
+            if solved(v):
+                txt = f"**{txt}**"
+            elif v["claimed"]:
+                txt += " ✗"
+                false_claims[n] += 1
+            cells.append(txt)
+        best = [r[n]["seconds"] for n in SOLVERS if r[n]["seconds"] is not None and solved(r[n])]
+        ratio = r["stiction"]["seconds"] / min(best) if best and solved(r["stiction"]) else None
+        if ratio is not None:
+            ratios.append(ratio)
+            wins += ratio <= 1.0
+        cells.append(f"{ratio:.2f}" if ratio is not None else ("no Siconos solver solves it" if not best else "—"))
+        lines.append(f"| {r['problem']} | {r['rows']} | " + " | ".join(cells) + " |")
+    lines += ["", "Solved (<= 1e-8): " + ", ".join(f"{n} {sum(solved(r[n]) for r in rows)}/{len(rows)}" for n in names)
+              + ". Claims of convergence that the residual contradicts: "
+              + ", ".join(f"{n} {false_claims[n]}" for n in names) + "."]
+    if ratios:
+        lines.append(f"Where both stiction and a Siconos solver solve the problem ({len(ratios)}): stiction at most "
+                     f"as fast as the best of them on {wins}; median time ratio {statistics.median(ratios):.2f}, "
+                     f"largest {max(ratios):.1f}.")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    sys.exit(main())
