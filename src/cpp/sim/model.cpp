@@ -64,6 +64,7 @@ void splitIntoSystems(const pinocchio::Model& world, std::vector<SystemModel>& s
   for (SystemModel& part : systems) {
     part.q_start = contiguousStart(part.q_index);
     part.v_start = contiguousStart(part.v_index);
+    part.free_body = part.model.njoints == 2 && part.model.joints[1].shortname() == "JointModelFreeFlyer";
   }
 }
 

@@ -127,6 +127,9 @@ struct SystemModel {
   pinocchio::Model model;
   std::vector<int> q_index, v_index;  ///< the world coordinate of each local q, v coordinate
   int q_start = -1, v_start = -1;     ///< the first world coordinate when contiguous (else -1)
+  /// One free-flyer joint: its mass matrix in its own frame (Pinocchio's LOCAL convention) is
+  /// constant, factored once rather than every step (unless a joint PD adds to its diagonal).
+  bool free_body = false;
 };
 
 class SimulatorModel {
@@ -180,6 +183,7 @@ struct SystemWork {
   Eigen::MatrixXd J6;     ///< 6 x nv: one point's Jacobian
   Eigen::Matrix3Xd Jrel;  ///< 3 x nv: one contact's relative point Jacobian
   std::vector<pinocchio::Force> forces;
+  bool mass_factored = false;  ///< free body: data.M, U, D hold its constant mass matrix and factor
 };
 
 class SimulatorData {
