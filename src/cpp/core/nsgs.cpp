@@ -44,7 +44,7 @@ void invertBlock(Eigen::Map<Eigen::MatrixXd> G, Eigen::Map<Eigen::MatrixXd> G_in
   }
   // fixed sizes for the contact blocks: no allocation (a 1024-contact problem's set-up
   // spent about 1 us per block allocating)
-  if (G.rows() == 3 && G.isApprox(G.transpose(), 0.0)) {
+  if (G.rows() == 3 && G == G.transpose()) {  // exactly symmetric
     // A symmetric positive definite contact block (the usual case): a fixed-size Cholesky,
     // accepted when its smallest pivot passes FullPivLU's relative threshold.
     const Eigen::Matrix3d g = G;

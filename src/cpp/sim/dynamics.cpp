@@ -54,12 +54,29 @@ void nonLinearEffectsFromKinematics(const pinocchio::Model& model, pinocchio::Da
   }
 }
 
-}  // namespace
-
-namespace {
 // M of one part (crba; h kd + h^2 kp on its diagonal for an implicit PD over h > 0) and its
 // factor M = U D U^T, in w.data. Throws when M is not positive definite.
-void factorMass(const SystemModel& part, SystemWork& w, const JointControl& control, double implicit_pd_step);
+void factorMass(const SystemModel& part, SystemWork& w, const JointControl& control, double implicit_pd_step) {
+  const pinocchio::Model& model = part.model;
+  // q as Eigen::Ref: the instantiation libpinocchio ships (extern template), not a fresh one
+  // here (a VectorXd argument made this file take 55 s to compile instead of 14 s).
+  pinocchio::crba(model, w.data, Eigen::Ref<const Eigen::VectorXd>(w.q), pinocchio::Convention::LOCAL);
+  if (implicit_pd_step > 0.0) {
+    // Implicit joint PD over a step h: tau(q+, v+) ~ kp (q_t - q - h v+) + kd (v_t - v+)
+    // moves h kd + h^2 kp onto M's diagonal (stable for any gains; MuJoCo's implicitfast
+    // does the damping part). The -h kp v part of tau is added above.
+    const double h = implicit_pd_step;
+    for (Eigen::Index k = 0; k < model.nv; ++k) {
+      const int world = part.v_index[k];
+      w.data.M(k, k) += h * control.kd[world] + h * h * control.kp[world];
+    }
+  }
+  // M = U D U^T by Pinocchio's tree-sparse Cholesky (cheaper than a dense LLT).
+  pinocchio::cholesky::decompose(model, w.data);
+  if (model.nv > 0 && !(w.data.D.minCoeff() > 0.0))
+    throw std::runtime_error("the mass matrix of '" + model.name + "' is not positive definite at this configuration");
+}
+
 }  // namespace
 
 void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
@@ -86,29 +103,6 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
     scatterV(part, w.v_free, sd.v_free);
   }
 }
-
-namespace {
-void factorMass(const SystemModel& part, SystemWork& w, const JointControl& control, double implicit_pd_step) {
-  const pinocchio::Model& model = part.model;
-  // q as Eigen::Ref: the instantiation libpinocchio ships (extern template), not a fresh one
-  // here (a VectorXd argument made this file take 55 s to compile instead of 14 s).
-  pinocchio::crba(model, w.data, Eigen::Ref<const Eigen::VectorXd>(w.q), pinocchio::Convention::LOCAL);
-  if (implicit_pd_step > 0.0) {
-    // Implicit joint PD over a step h: tau(q+, v+) ~ kp (q_t - q - h v+) + kd (v_t - v+)
-    // moves h kd + h^2 kp onto M's diagonal (stable for any gains; MuJoCo's implicitfast
-    // does the damping part). The -h kp v part of tau is added above.
-    const double h = implicit_pd_step;
-    for (Eigen::Index k = 0; k < model.nv; ++k) {
-      const int world = part.v_index[k];
-      w.data.M(k, k) += h * control.kd[world] + h * h * control.kp[world];
-    }
-  }
-  // M = U D U^T by Pinocchio's tree-sparse Cholesky (cheaper than a dense LLT).
-  pinocchio::cholesky::decompose(model, w.data);
-  if (model.nv > 0 && !(w.data.D.minCoeff() > 0.0))
-    throw std::runtime_error("the mass matrix of '" + model.name + "' is not positive definite at this configuration");
-}
-}  // namespace
 
 void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
   // A = sum over parts of (D^-1/2 U^-1 J_s^T)^T (D^-1/2 U^-1 J_s^T): symmetric by construction.
