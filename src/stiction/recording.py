@@ -161,6 +161,16 @@ def _fmt(x: float) -> str:
     return f"{x:.4g}"
 
 
+def visual_poses(visual_model, oMi: np.ndarray) -> np.ndarray:
+    """World placement of every visual geometry, (N, geometries, 4, 4), from the joints' world
+    placements oMi (N, joints, 4, 4) (`Simulator.joint_placements`): oMi[parent] @ placement, what
+    `pinocchio.updateGeometryPlacements` computes, without a world Data."""
+    objects = visual_model.geometryObjects
+    parents = [go.parentJoint for go in objects]
+    local = np.array([np.asarray(go.placement.homogeneous) for go in objects]).reshape(len(objects), 4, 4)
+    return np.einsum("kgab,gbc->kgac", oMi[:, parents], local)
+
+
 def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: float | None = None) -> dict:
     """Write `traj` of simulator `sim` to a self-contained HTML file (meshcat viewer).
 
@@ -229,10 +239,12 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
     idx = np.searchsorted(traj.t - traj.t[0], times - 1e-9).clip(0, len(traj.t) - 1)
     nf = len(idx)
     nc = len(scene.contacts)  # coal pair slots (after these) are not drawn
-    centers = sim.contact_centers(traj)[idx]
+    oMi = sim.joint_placements(traj.q[idx])  # (nf, joints, 4, 4), part by part: no world Data
+    parents = [model.frames[c.frame].parentJoint for c in scene.contacts]
+    local = np.array([model.frames[c.frame].placement.act(np.asarray(c.offset)) for c in scene.contacts])
+    centers = np.einsum("kiab,ib->kia", oMi[:, parents][..., :3, :3], local.reshape(nc, 3)) + oMi[:, parents][..., :3, 3]
     # the contacts' half-space frames (t1, t2, n) in the world: a body's face turns with it
     frames = np.empty((nf, nc, 3, 3))
-    oMi = sim.joint_placements(traj.q[idx])  # (nf, joints, 4, 4)
     for k in range(nf):
         for i, c in enumerate(scene.contacts):
             h = sim.model.halfspaces[c.halfspace]
@@ -261,16 +273,12 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
                                      for c in (lo[2], hi[2])]))
         except Exception:  # a geometry without a box: its origin only
             corners.append(np.zeros((1, 3)))
-    poses = np.empty((nf, len(names), 4, 4))
+    world = visual_poses(vmodel, oMi)  # (nf, geometries, 4, 4)
+    poses = world.copy()
     pts = [points.reshape(-1, 3)]
-    placements = [(go.parentJoint, np.asarray(go.placement.homogeneous)) for go in vmodel.geometryObjects]
-    for frame_no in range(nf):
-        for g, (joint, iMg) in enumerate(placements):
-            M = oMi[frame_no, joint] @ iMg  # the geometry in the world
-            T = M.copy()
-            T[:3, :3] = T[:3, :3] @ scales[g]
-            poses[frame_no, g] = T
-            pts.append(corners[g] @ M[:3, :3].T + M[:3, 3])
+    for g in range(len(names)):
+        poses[:, g, :3, :3] = world[:, g, :3, :3] @ scales[g]
+        pts.append((corners[g] @ world[:, g, :3, :3].transpose(0, 2, 1) + world[:, g, None, :3, 3]).reshape(-1, 3))
     pts = np.concatenate(pts)
     size = max(float(np.linalg.norm(pts.max(0) - pts.min(0))), 0.1)
 
