@@ -10,7 +10,8 @@ from stiction.cli import main
 def test_scaling_json_has_one_row_per_size_and_an_exponent(capsys):
     assert main(["bench", "scaling", "--sizes", "4", "8", "--steps", "5", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["command"] == "stiction bench scaling"
+    assert out["command"] == "stiction bench scaling --sizes 4 8 --steps 5 --json"
+    assert out["stamp"]["cores"] >= 1 and out["stamp"]["versions"]["pinocchio"].startswith("4.1")
     assert [r["contacts"] for r in out["rows"]] == [4, 8]
     for r in out["rows"]:
         assert set(r) >= {"scene", "contacts", "us_per_step", "us_per_contact", "peak_memory_mb", "mujoco_us_per_step"}

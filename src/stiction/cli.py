@@ -271,29 +271,73 @@ def cmd_formulations(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    if args.bench != "scaling":  # argparse restricts the choices; kept for the message
-        raise ValueError(f"unknown benchmark {args.bench!r}")
-    from .bench import scaling
+    from .bench import load_bench, sweep
 
-    if args.plot:
+    module = load_bench(args.bench)
+    if getattr(args, "plot", None):
         _output_path("--plot", args.plot, (".png", ".pdf", ".svg"))
-        require("matplotlib", "plot", "--plot")
-    sizes = args.sizes or ([4, 16, 64] if args.quick else [4, 16, 64, 128, 256])
-    steps = 50 if args.quick else args.steps
-    progress = None if args.json else (lambda r: print(
-        f"{r['contacts']:6d} contacts  {r['us_per_step']:10.1f} µs/step  {r['peak_memory_mb']:8.0f} MB"
-        + ("" if r["mujoco_us_per_step"] is None else f"  MuJoCo {r['mujoco_us_per_step']:9.1f} µs/step"),
-        flush=True))
-    result = scaling.run(sizes, steps=steps, progress=progress, layout=args.layout)
-    if args.plot:
-        scaling.plot(result, args.plot)
+    if args.out or getattr(args, "plot", None):
+        require("matplotlib", "plot", "the charts (--out, --plot)")
+    result = sweep.run(module, args, _command_line(args))
+    if getattr(args, "plot", None):  # scaling's own --plot FILE, kept beside --out
+        module.plot_result(result, args.plot, result["stamp"])
     if args.json:
-        json.dump(result, sys.stdout, indent=1)
+        json.dump(result, sys.stdout, indent=1, allow_nan=False)
         sys.stdout.write("\n")
     else:
-        print(f"fitted exponent {result['exponent']:.2f}" + (
-            "" if result["mujoco_exponent"] is None else f" (MuJoCo {result['mujoco_exponent']:.2f})"))
+        _print_bench(module, result)
     return 0
+
+
+def cmd_bench_all(args) -> int:
+    """Every chart of docs/benchmarks.md, one bench after another, into one folder."""
+    from .bench import ALL_RUNS
+
+    common = ["--out", args.out] + (["--quick"] if args.quick else [])
+    common += ["--cluster", args.cluster] if args.cluster else []
+    common += ["--workers", str(args.workers)] if args.workers else []
+    results = []
+    for run in ALL_RUNS:
+        argv = ["bench", *run, *common, "--json"] if args.json else ["bench", *run, *common]
+        if not args.json:
+            print(f"== stiction {' '.join(argv)}", flush=True)
+        parsed = build_parser().parse_args(argv)
+        parsed.argv = argv
+        if args.json:
+            from .bench import load_bench, sweep
+
+            results.append(sweep.run(load_bench(parsed.bench), parsed, _command_line(parsed)))
+        else:
+            cmd_bench(parsed)
+    if args.json:
+        json.dump({"command": _command_line(args), "benches": results}, sys.stdout, indent=1, allow_nan=False)
+        sys.stdout.write("\n")
+    return 0
+
+
+def _command_line(args) -> str:
+    argv = getattr(args, "argv", None)
+    return "stiction " + " ".join(argv) if argv else "stiction bench " + getattr(args, "bench", "all")
+
+
+def _print_bench(module, result: dict) -> None:
+    """A short human summary: the rows as a table (first columns), then the summary keys."""
+    rows = result["rows"]
+    fields = list(module.FIELDS)[:8]
+    print("  ".join(f"{f:>14.14}" for f in fields))
+    for r in rows:
+        print("  ".join(f"{_short(r[f]):>14.14}" for f in fields))
+    for k, v in result.items():
+        if k not in ("command", "stamp", "rows", "files"):
+            print(f"{k}: {_short(v) if not isinstance(v, (dict, list)) else json.dumps(v)[:200]}")
+    for f in result.get("files", []):
+        print(f"wrote {f}")
+
+
+def _short(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return "" if v is None else str(v)
 
 
 def cmd_solvers(args) -> int:
@@ -343,7 +387,7 @@ def _version() -> str:
         return __version__
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="stiction", description=__doc__.split("\n\n")[0],
                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"stiction {_version()}")
@@ -404,21 +448,51 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_formulations)
 
-    p = sub.add_parser("bench", help="benchmarks: scaling (cost per step against contact count)")
-    p.add_argument("bench", choices=["scaling"])
-    p.add_argument("--json", action="store_true", help='print {"rows": [...], "exponent": ...}')
-    p.add_argument("--plot", metavar="FILE.png", help="the log-log chart")
-    p.add_argument("--quick", action="store_true", help="4, 16, 64 contacts, 50 steps")
-    p.add_argument("--sizes", type=_positive_int, nargs="+", metavar="N", help="contact counts (multiples of 4)")
-    p.add_argument("--steps", type=_positive_int, default=200, help="timed steps per size (default 200)")
-    p.add_argument("--layout", choices=["grid", "tower"], default="grid",
-                   help="cubes side by side on the ground (default) or stacked")
-    p.set_defaults(func=cmd_bench)
+    p = sub.add_parser("bench", help="benchmarks: scaling, work-precision, profiles, stability, all")
+    bench_sub = p.add_subparsers(dest="bench", required=True, parser_class=_Parser, metavar="BENCH")
+    from .bench import available_benches, load_bench, sweep
+
+    for name in available_benches():
+        module = load_bench(name)
+        q = bench_sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.add_arguments(q)
+        sweep.add_common_arguments(q)
+        q.set_defaults(func=cmd_bench)
+    q = bench_sub.add_parser("all", help="every bench, into one folder (the figures of docs/benchmarks.md)")
+    q.add_argument("--out", required=True, metavar="DIR", help="the folder for every CSV, JSON and PNG")
+    q.add_argument("--quick", action="store_true", help="the small version of each bench")
+    q.add_argument("--cluster", metavar="ADDRESS", help="a Dask scheduler address, or 'local'")
+    q.add_argument("--workers", type=_positive_int, metavar="N", help="local worker processes")
+    q.add_argument("--json", action="store_true", help="print every bench's result as one JSON document")
+    q.set_defaults(func=cmd_bench_all)
 
     p = sub.add_parser("solvers", help="list the solver names")
     p.set_defaults(func=cmd_solvers)
 
-    args = parser.parse_args(argv)
+    dump = _optional_module("dump")
+    if dump is not None:
+        p = sub.add_parser("dump", help="write each step's contact problem of a scene as FCLib HDF5")
+        dump.add_arguments(p)
+        p.set_defaults(func=dump.main)
+    return parser
+
+
+def _optional_module(name: str):
+    """A module of the package that may be absent from a partial checkout (the parser lists it when present)."""
+    import importlib
+
+    try:
+        return importlib.import_module(f"{__package__}.{name}")
+    except ModuleNotFoundError as exc:
+        if exc.name != f"{__package__}.{name}":
+            raise
+        return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(argv)
+    args.argv = argv
     try:
         return args.func(args)
     except (ValueError, TypeError, FileNotFoundError, IsADirectoryError, PermissionError, MissingExtraError) as exc:

@@ -84,37 +84,82 @@ def fit_exponent(contacts: list[int], us: list[float]) -> float | None:
     return sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx if sxx > 0 else None
 
 
-def run(sizes: list[int], steps: int = 200, warmup: int = 20, progress=None, layout: str = "grid") -> dict:
-    """sizes: contact counts (multiples of 4); layout: "grid" or "tower". Returns {"command", "layout",
-    "rows", "exponent", "mujoco_exponent"}."""
-    if layout not in LAYOUTS:
-        raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
-    rows = []
+NAME = "scaling"
+HELP = "cost per step against contact count: a grid or a tower of cubes, beside MuJoCo"
+FIELDS = ("scene", "layout", "contacts", "steps", "us_per_step", "us_per_contact", "peak_memory_mb",
+          "mujoco_us_per_step", "all_converged", "max_penetration", "max_body_drift")
+KEY_FIELDS = ("layout", "contacts", "steps")
+DEFAULT_WORKERS = 1  # a timing and a peak-memory figure per size: one size at a time on the machine
+WARMUP_STEPS = 20
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--sizes", type=int, nargs="+", metavar="N", help="contact counts (multiples of 4)")
+    parser.add_argument("--steps", type=int, default=200, help="timed steps per size (default 200; --quick 50)")
+    parser.add_argument("--layout", choices=list(LAYOUTS), default="grid",
+                        help="cubes side by side on the ground (default) or stacked")
+    parser.add_argument("--plot", metavar="FILE.png", help="the log-log chart (also written to --out)")
+
+
+def cases(args) -> list[dict]:
+    sizes = args.sizes or ([4, 16, 64] if args.quick else [4, 16, 64, 128, 256])
+    steps = 50 if args.quick else args.steps
+    if args.layout not in LAYOUTS:
+        raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {args.layout!r}")
+    if steps < 1:
+        raise ValueError(f"--steps must be >= 1, got {steps}")
     for contacts in sizes:
         if contacts < 4 or contacts % 4:
             raise ValueError(f"contact counts must be positive multiples of 4 (4 corners per cube), got {contacts}")
-        cubes = contacts // 4
-        out = subprocess.run([sys.executable, "-c", MEASURE, str(cubes), str(steps), str(warmup), layout],
-                             capture_output=True, text=True)
-        if out.returncode != 0:
-            raise RuntimeError(f"cube {layout} of {contacts} contacts failed: {out.stderr.strip().splitlines()[-1:]}")
-        m = json.loads(out.stdout.strip().splitlines()[-1])
-        row = {"scene": f"cube-{layout}-{contacts}", "contacts": contacts, "us_per_step": m["us_per_step"],
-               "us_per_contact": m["us_per_step"] / contacts, "peak_memory_mb": m["peak_memory_mb"],
-               "mujoco_us_per_step": mujoco_us_per_step(cubes, steps, warmup, layout),
-               "all_converged": m["all_converged"], "max_penetration": m["max_penetration"],
-               "max_body_drift": m["max_body_drift"]}
-        rows.append(row)
-        if progress:
-            progress(row)
-    result = {"command": "stiction bench scaling", "layout": layout, "rows": rows,
-              "exponent": fit_exponent([r["contacts"] for r in rows], [r["us_per_step"] for r in rows])}
+    return [{"layout": args.layout, "contacts": c, "steps": steps} for c in sizes]
+
+
+def evaluate(case: dict) -> dict:
+    """One size in its own subprocess (its peak memory is that size's), MuJoCo beside it."""
+    layout, contacts, steps = case["layout"], case["contacts"], case["steps"]
+    cubes = contacts // 4
+    out = subprocess.run([sys.executable, "-c", MEASURE, str(cubes), str(steps), str(WARMUP_STEPS), layout],
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(f"cube {layout} of {contacts} contacts failed: {out.stderr.strip().splitlines()[-1:]}")
+    m = json.loads(out.stdout.strip().splitlines()[-1])
+    return {"scene": f"cube-{layout}-{contacts}", "layout": layout, "contacts": contacts, "steps": steps,
+            "us_per_step": m["us_per_step"], "us_per_contact": m["us_per_step"] / contacts,
+            "peak_memory_mb": m["peak_memory_mb"],
+            "mujoco_us_per_step": mujoco_us_per_step(cubes, steps, WARMUP_STEPS, layout),
+            "all_converged": m["all_converged"], "max_penetration": m["max_penetration"],
+            "max_body_drift": m["max_body_drift"]}
+
+
+def summarize(rows: list[dict]) -> dict:
+    layouts = sorted({r["layout"] for r in rows})
+    out = {"layout": layouts[0] if len(layouts) == 1 else layouts,
+           "exponent": fit_exponent([r["contacts"] for r in rows], [r["us_per_step"] for r in rows])}
     mj = [r["mujoco_us_per_step"] for r in rows]
-    result["mujoco_exponent"] = fit_exponent([r["contacts"] for r in rows], mj) if all(mj) else None
-    return result
+    out["mujoco_exponent"] = fit_exponent([r["contacts"] for r in rows], mj) if rows and all(mj) else None
+    return out
 
 
-def plot(result: dict, path: str) -> None:
+def run(sizes: list[int], steps: int = 200, layout: str = "grid") -> dict:
+    """The sweep without the CLI: {"layout", "rows", "exponent", "mujoco_exponent"}."""
+    import argparse
+
+    args = argparse.Namespace(sizes=sizes, steps=steps, layout=layout, quick=False)
+    rows = [evaluate(c) for c in cases(args)]
+    return {"rows": rows, **summarize(rows)}
+
+
+def plot(rows: list[dict], out_dir, stamp: dict) -> list:
+    from pathlib import Path
+
+    layouts = {r["layout"] for r in rows}
+    name = "scaling" if layouts == {"grid"} else "scaling-" + "-".join(sorted(layouts))
+    path = Path(out_dir) / f"{name}.png"
+    plot_result({"rows": rows, **summarize(rows)}, path, stamp)
+    return [path]
+
+
+def plot_result(result: dict, path, stamp: dict | None = None) -> None:
     from .._optional import require
 
     require("matplotlib", "plot", "the scaling chart")
@@ -135,7 +180,10 @@ def plot(result: dict, path: str) -> None:
     ax.set_title("Cost per step against contact count")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
-    fig.text(0.01, 0.01, "stiction bench scaling; " + time.strftime("%Y-%m-%d") + f"; {sys.platform}", fontsize=7)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    if stamp is not None:
+        from .sweep import stamp_figure
+
+        stamp_figure(fig, stamp)
     fig.savefig(path, dpi=120)
     plt.close(fig)
