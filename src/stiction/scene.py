@@ -286,7 +286,7 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
         obj_mu = mu if obj["mu"] is None else obj["mu"]
         for c, corner in enumerate(_corners(half, z_sign=-1)):
             contacts.append(_sphere(f"{obj['name']}-corner{c}", frame, corner, 0.0, 0, obj_mu, cmodel))
-        q0 = np.concatenate([q0, [obj["xy"][0], obj["xy"][1], float(half[2]), 0.0, 0.0, 0.0, 1.0]])
+        q0 = np.concatenate([q0, [obj["xy"][0], obj["xy"][1], float(half[2]) + obj["z"], 0.0, 0.0, 0.0, 1.0]])
 
     for w, wall in enumerate(cfg["walls"]):
         name = wall["name"] or f"wall{len(halfspaces)}"

@@ -125,6 +125,8 @@ OBJECTS = Table("objects", "Free boxes added to a `robot` or `urdf` scene, each 
         required=True),
     Key("urdf", "str", "a box URDF (relative: to the scene file's folder, then the bundled robots)", "cube.urdf"),
     Key("xy", "vector", "centre x, y in the world (the box rests on the ground)", required=True, length=2),
+    Key("z", "float", "height in m of the box's bottom above the ground (0: it rests on it; above: held by the "
+        "robot, e.g. between two pads, or falling)", 0.0, low=0.0),
     Key("mu", "float", "friction coefficient of its corners on the ground (default: [ground] mu)", low=0.0),
 ), array=True)
 
