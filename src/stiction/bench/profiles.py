@@ -1,0 +1,596 @@
+"""The contact solvers alone on problem sets: Dolan-Moré performance profiles, data profiles,
+success and false-convergence rates (``stiction bench profiles``).
+
+Sets: ``fclib``, the bundled FCLib problems (benchmarks/fclib), and ``robot``, problems the package
+dumps from its own simulations (:func:`robot_problem_set`: standing, slipping, impacts, grasps; one
+FCLib file per step, cached under ``--problems``). Solvers: ours (default, nsgs, admm, newton,
+exact law eq. 65), Pinocchio's ADMM and PGS (:mod:`stiction.baselines`, its NCP with De Saxcé's
+correction) and, when Debian's python3-siconos is importable by ``/usr/bin/python3``, Siconos'
+NSGS, NSN-AC and PROX (one helper process, timed there).
+
+Every answer is judged by one yardstick, whatever the solver claims: ``residual`` = the natural
+map of the exact law at λ relative to ‖b‖ (:func:`stiction.exact_law_measures`, eq. 65, on the
+stored A), and ``solved`` = residual <= tol. Each solver is asked for the same ``tol``; a solve
+that fails, crashes or overruns the time limit is not solved and counts at the time limit.
+Times: the median wall time of the solve call over a few repeats (ours: ``stiction.solve``;
+Pinocchio: its ``solver.solve``; Siconos: ``fc3d_driver`` timed in its process).
+"""
+from __future__ import annotations
+
+import functools
+import json
+import math
+import os
+import select
+import statistics
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+NAME = "profiles"
+HELP = "solvers alone on FCLib and robot problem sets: performance/data profiles, false convergence"
+FIELDS = ("set", "problem", "solver", "ours", "seconds", "residual", "converged_claimed", "solved",
+          "tol", "iterations", "contacts", "time_limit", "failure")
+KEY_FIELDS = ("set", "problem", "solver", "tol")
+DEFAULT_WORKERS = 1  # timings must not share the machine
+
+OURS = ("default", "nsgs", "admm", "newton")
+PINOCCHIO = ("pinocchio-admm", "pinocchio-pgs")
+SICONOS = {"siconos-nsgs": "SICONOS_FRICTION_3D_NSGS", "siconos-nsn-ac": "SICONOS_FRICTION_3D_NSN_AC",
+           "siconos-prox": "SICONOS_FRICTION_3D_PROX"}
+ALL_SOLVERS = OURS + PINOCCHIO + tuple(SICONOS)
+QUICK_SOLVERS = ("default", "nsgs", "admm", "pinocchio-admm", "pinocchio-pgs")
+TOLS = (1e-4, 1e-8)
+SETS = ("fclib", "robot")
+MAX_ITERATIONS = 10000
+SGM_SHIFT = 1e-5  # s: the shifted geometric mean's shift, about the timer noise of one Python call
+QUICK_FCLIB = ("Toy--FC3D_Example1.dat", "Toy--FrictionContact3D_RR_1c.dat", "Rover--Rover1039.dat",
+               "Rover--Rover4613.dat", "CubesH8--LMGC_GlobalFrictionContactProblem00046.hdf5",
+               "OneObject--OneObject-i1028-138.hdf5.dat")
+ROBOT_SET_VERSION = 1
+
+
+# ---- the robot problem set ---------------------------------------------------------------------------
+
+# (category, scene, steps simulated, problems kept, first step eligible); quick keeps 2 of each row
+ROBOT_SCENES = (
+    ("standing", "solo12-stand", 300, 12, 20),
+    ("standing", "go2-stand", 300, 12, 20),
+    ("standing", "anymal-stand", 300, 12, 20),
+    ("standing", "talos-stand", 300, 12, 20),
+    ("slipping", "solo12-slope-slip", 300, 12, 20),
+    ("slipping", "cube-incline-slip", 300, 12, 20),
+    ("grasps", "ur5-push-box", 600, 12, 20),
+    ("grasps", "ur5-push-wall", 600, 12, 20),
+    ("stacks", "two-cube-stack", 300, 6, 20),
+    ("stacks", "box-tower-20", 300, 6, 20),
+)
+QUICK_ROBOT_SCENES = ("solo12-stand", "cube-incline-slip", "ur5-push-wall", "two-cube-stack")
+CUBE_DROPS, QUICK_CUBE_DROPS = 8, 1  # impacts: cubes dropped at random attitudes, 3 impact steps each
+IMPACT_STEPS = 3
+
+
+def default_problem_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "stiction" / "problems"
+
+
+def _impact_steps(sim_factory, steps: int, count: int) -> list[int]:
+    """The first `count` steps whose solve found a non-zero normal force (the landing)."""
+    sim = sim_factory()
+    traj = sim.rollout(steps * sim.dt)
+    normal = traj.lam[1:, :, 2].max(axis=1) if traj.lam.shape[1] else np.zeros(len(traj.t) - 1)
+    return [int(k) + 1 for k in np.flatnonzero(normal > 0)[:count]]
+
+
+def _cube_drop(seed: int):
+    """A 10 cm, 1 kg cube released 1-8 cm above flat ground (mu 0.5) at a seeded random attitude,
+    moving sideways: its corners land one after another (impacts, eq. 65 with large -b_n)."""
+    import pinocchio as pin
+
+    from ..scene import build_scene
+    from ..simulator import Simulator
+
+    rng = np.random.default_rng(seed)
+    scene = build_scene({"name": f"cube-drop-{seed}", "urdf": "cube.urdf", "free_flyer": True, "dt": 1e-3,
+                         "ground": {"mu": 0.5}, "contacts": {"box_corners": True}})
+    quat = rng.standard_normal(4)
+    quat /= np.linalg.norm(quat)
+    R = pin.Quaternion(quat[3], quat[0], quat[1], quat[2]).toRotationMatrix()
+    corners = np.array([[sx, sy, sz] for sx in (-.05, .05) for sy in (-.05, .05) for sz in (-.05, .05)])
+    lowest = (corners @ R.T)[:, 2].min()
+    q = np.concatenate([[0.0, 0.0, -lowest + rng.uniform(0.01, 0.08)], quat])
+    v = np.concatenate([rng.uniform(-1.0, 1.0, 2), [0.0], rng.uniform(-3.0, 3.0, 3)])
+
+    def make():
+        sim = Simulator(scene)
+        sim.set_state(q=q, v=v)
+        return sim
+    return scene.name, make
+
+
+def robot_problem_set(directory: str | os.PathLike | None = None, quick: bool = False, seed: int = 0) -> list[dict]:
+    """Problems dumped from the package's own simulations (``stiction dump``): robots standing, sliding
+    down a slope, objects landing (impacts), an arm pushing (grasps), stacked boxes (A couples the
+    contacts through the bodies between them). Built once and cached in
+    ``directory/robot-v<version>-seed<seed>[-quick]`` (a manifest.json lists them; delete the folder
+    to rebuild). Steps are drawn by a seeded generator after the first `first` steps (standing,
+    slipping, grasps); impacts are the first steps with contact force of a ball landing on a table
+    and of seeded cube drops. Returns one record per problem: name, category, path, contacts."""
+    from ..dump import dump
+
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"robot_problem_set: seed must be an integer >= 0, got {seed!r}")
+    root = Path(directory) if directory is not None else default_problem_dir()
+    folder = root / f"robot-v{ROBOT_SET_VERSION}-seed{seed}{'-quick' if quick else ''}"
+    manifest = folder / "manifest.json"
+    if manifest.is_file():
+        recs = json.loads(manifest.read_text())["problems"]
+        if all((folder / r["file"]).is_file() for r in recs):
+            return [{**r, "path": str(folder / r["file"])} for r in recs]
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    recs = []
+
+    def add(category, written):
+        for w in written:
+            p = Path(w["path"])
+            recs.append({"name": p.stem, "category": category, "file": p.name,
+                         "scene": w["scene"], "step": w["step"], "contacts": len(w["contacts"])})
+
+    for category, scene, steps, keep, first in ROBOT_SCENES:
+        if quick and scene not in QUICK_ROBOT_SCENES:
+            continue
+        n = 2 if quick else keep
+        chosen = sorted(int(k) for k in rng.choice(np.arange(first, steps + 1), size=n, replace=False))
+        add(category, dump(scene, max(chosen), folder, only=chosen, prefix=f"{category}--{scene}"))
+    from ..simulator import Simulator
+
+    ball = lambda: Simulator("ball-on-table")  # noqa: E731
+    hits = _impact_steps(ball, 400, 1 if quick else IMPACT_STEPS)
+    add("impacts", dump(ball(), max(hits), folder, only=hits, prefix="impacts--ball-on-table"))
+    for d in range(QUICK_CUBE_DROPS if quick else CUBE_DROPS):
+        name, make = _cube_drop(int(rng.integers(2**31)))
+        hits = _impact_steps(make, 300, 2 if quick else IMPACT_STEPS)
+        if hits:
+            add("impacts", dump(make(), max(hits), folder, only=hits, prefix=f"impacts--{name}"))
+    manifest.write_text(json.dumps({"version": ROBOT_SET_VERSION, "seed": seed, "quick": quick,
+                                    "problems": recs}, indent=1))
+    return [{**r, "path": str(folder / r["file"])} for r in recs]
+
+
+def fclib_problem_set(quick: bool = False) -> list[dict]:
+    from ..resources import fclib_dir
+
+    files = sorted(p for p in fclib_dir().iterdir() if p.suffix in (".hdf5", ".dat"))
+    if quick:
+        files = [p for p in files if p.name in QUICK_FCLIB]
+    return [{"name": p.name, "category": p.name.split("--")[0], "path": str(p)} for p in files]
+
+
+# ---- the bench contract ----------------------------------------------------------------------------
+
+def _floats(text: str) -> list[float]:
+    vals = [float(x) for x in text.split(",") if x.strip()]
+    if not vals or any(not (v > 0 and math.isfinite(v)) for v in vals):
+        raise ValueError(f"--tols: positive finite numbers separated by commas, got {text!r}")
+    return vals
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--sets", default=",".join(SETS), help="problem sets, comma-separated: fclib, robot")
+    parser.add_argument("--solvers", default=None,
+                        help=f"comma-separated, of {', '.join(ALL_SOLVERS)} (default: all usable; --quick: "
+                             f"{', '.join(QUICK_SOLVERS)})")
+    parser.add_argument("--tols", default=",".join(f"{t:g}" for t in TOLS), help="tolerances (default 1e-4,1e-8)")
+    parser.add_argument("--time-limit", type=float, default=None,
+                        help="seconds per solve (default 10; --quick 2); a solve over it counts as failed")
+    parser.add_argument("--problems", default=None,
+                        help=f"cache folder of the robot problem set (default {default_problem_dir()})")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the robot problem set (default 0)")
+
+
+def siconos_usable(python: str = "/usr/bin/python3") -> bool:
+    """Debian's python3-siconos (with scipy) importable by the system Python."""
+    if not os.path.exists(python):
+        return False
+    try:
+        out = subprocess.run([python, "-c", "import siconos.numerics, scipy"], capture_output=True, timeout=60)
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return out.returncode == 0
+
+
+def cases(args) -> list[dict]:
+    quick = bool(getattr(args, "quick", False))
+    sets = [s.strip() for s in (getattr(args, "sets", None) or ",".join(SETS)).split(",") if s.strip()]
+    for s in sets:
+        if s not in SETS:
+            raise ValueError(f"--sets: unknown set {s!r} (known: {', '.join(SETS)})")
+    given = getattr(args, "solvers", None)
+    if given:
+        solvers = [s.strip() for s in given.split(",") if s.strip()]
+        for s in solvers:
+            if s not in ALL_SOLVERS:
+                raise ValueError(f"--solvers: unknown solver {s!r} (known: {', '.join(ALL_SOLVERS)})")
+        if any(s in SICONOS for s in solvers) and not siconos_usable():
+            raise ValueError("--solvers names Siconos, which /usr/bin/python3 cannot import "
+                             "(apt install python3-siconos python3-scipy)")
+    else:
+        solvers = list(QUICK_SOLVERS if quick else OURS + PINOCCHIO)
+        if not quick and siconos_usable():
+            solvers += list(SICONOS)
+    tols = _floats(getattr(args, "tols", None) or ",".join(map(str, TOLS)))
+    limit = getattr(args, "time_limit", None)
+    limit = (2.0 if quick else 10.0) if limit is None else float(limit)
+    if not (limit > 0 and math.isfinite(limit)):
+        raise ValueError(f"--time-limit must be a positive number of seconds, got {limit}")
+    problems = []
+    for s in sets:
+        recs = fclib_problem_set(quick) if s == "fclib" else \
+            robot_problem_set(getattr(args, "problems", None), quick, int(getattr(args, "seed", 0) or 0))
+        problems += [(s, r) for r in recs]
+    return [{"set": s, "problem": r["name"], "path": r["path"], "solver": solver, "ours": solver in OURS,
+             "tol": tol, "time_limit": limit, "repeat_budget": 0.01 if quick else 0.2}
+            for s, r in problems for tol in tols for solver in solvers]
+
+
+@functools.lru_cache(maxsize=4)
+def _load(path: str):
+    from .. import fclib
+
+    P = fclib.load(path)
+    return P, P.problem()
+
+
+def _relative_residual(problem, lam) -> float:
+    from .. import _core
+
+    lam = np.asarray(lam, dtype=np.float64)
+    if lam.shape != (problem.num_rows,) or not np.all(np.isfinite(lam)):
+        return math.inf
+    return float(_core.exact_law_measures(problem, lam).relative_residual)
+
+
+def _repeat(solve, budget: float):
+    """The median time of `solve` (returns (seconds, result)) over up to 5 runs, stopping once
+    `budget` seconds are spent; the last result."""
+    times, spent, res = [], 0.0, None
+    while True:
+        t, res = solve()
+        times.append(t)
+        spent += t
+        if spent >= budget or len(times) >= 5:
+            return statistics.median(times), res
+
+
+def _solve_ours(problem, solver, tol, limit, budget):
+    import stiction
+
+    def once():
+        t0 = time.perf_counter()
+        r = stiction.solve(problem, solver=solver, tol=tol, max_iter=MAX_ITERATIONS, time_limit=limit)
+        return time.perf_counter() - t0, r
+    seconds, r = _repeat(once, budget)
+    return seconds, np.asarray(r.lam), bool(r.converged), int(r.iterations)
+
+
+PINOCCHIO_PROBE = 20
+
+
+def _solve_pinocchio(problem, method, tol, limit, budget):
+    """Pinocchio cannot be stopped mid-solve: its iteration budget is set from a 20-iteration probe
+    so that the solve fits the time limit (at most MAX_ITERATIONS)."""
+    from ..baselines import pinocchio_solve
+
+    probe = pinocchio_solve(problem, method, tol=tol, max_iter=PINOCCHIO_PROBE)
+    max_iter = PINOCCHIO_PROBE
+    if not probe.converged and probe.iterations >= PINOCCHIO_PROBE:
+        per_iteration = max(probe.seconds, 1e-9) / probe.iterations
+        max_iter = max(PINOCCHIO_PROBE, min(MAX_ITERATIONS, int(limit / per_iteration)))
+
+    def once():
+        r = pinocchio_solve(problem, method, tol=tol, max_iter=max_iter)
+        return r.seconds, r
+    seconds, r = _repeat(once, budget)
+    return seconds, r.lam, bool(r.converged), int(r.iterations)
+
+
+SICONOS_SERVER = r"""
+import json, statistics, sys, time
+import numpy as np
+import siconos.numerics as sn
+for line in sys.stdin:
+    spec = json.loads(line)
+    try:
+        if spec["dat"]:
+            problem = sn.frictionContact_new_from_filename(spec["dat"])
+        else:
+            data = np.load(spec["npz"])
+            W = data["W"]
+            if np.count_nonzero(W) <= 0.1 * W.size:
+                import scipy.sparse as sp
+                W = sp.csr_matrix(W)
+            problem = sn.FrictionContactProblem(3, W, data["q"], data["mu"])
+        n = 3 * problem.numberOfContacts
+        times, out, spent = [], None, 0.0
+        while True:
+            so = sn.SolverOptions(getattr(sn, spec["solver_id"]))
+            so.iparam[sn.SICONOS_IPARAM_MAX_ITER] = spec["max_iter"]
+            so.dparam[sn.SICONOS_DPARAM_TOL] = spec["tol"]
+            r, u = np.zeros(n), np.zeros(n)
+            t0 = time.perf_counter()
+            info = sn.fc3d_driver(problem, r, u, so)
+            times.append(time.perf_counter() - t0)
+            spent += times[-1]
+            out = {"r": r.tolist(), "info": int(info), "iterations": int(so.iparam[sn.SICONOS_IPARAM_ITER_DONE])}
+            if spent >= spec["budget"] or len(times) >= 5:
+                break
+        out["seconds"] = statistics.median(times)
+    except Exception as exc:
+        out = {"error": f"{type(exc).__name__}: {exc}"[:120]}
+    print(json.dumps(out), flush=True)
+"""
+
+
+class _Siconos:
+    """One /usr/bin/python3 process serving Siconos solves over stdin/stdout (a process per solve
+    would cost its ~0.5 s start-up every time); stopped and restarted when a solve overruns."""
+
+    def __init__(self, python: str = "/usr/bin/python3"):
+        self.python, self.proc = python, None
+        self.tmp = tempfile.TemporaryDirectory(prefix="stiction-siconos-")
+
+    def _start(self):
+        self.proc = subprocess.Popen([self.python, "-c", SICONOS_SERVER], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, bufsize=1)
+
+    def stop(self):
+        if self.proc is not None:
+            self.proc.kill()
+            self.proc.wait()
+            self.proc = None
+
+    def solve(self, path: str, P, solver: str, tol: float, limit: float, budget: float) -> dict:
+        from .. import fclib
+
+        spec = {"solver_id": SICONOS[solver], "tol": tol, "budget": budget,
+                "max_iter": 1000 if solver == "siconos-nsn-ac" else MAX_ITERATIONS,
+                "dat": path if path.endswith(".dat") else None, "npz": None}
+        if spec["dat"] is None:  # Siconos' Python cannot read FCLib HDF5: W, q, mu in (n, t1, t2) order
+            inv = np.argsort(fclib._to_stiction_order(P.contacts))
+            npz = os.path.join(self.tmp.name, f"{abs(hash(path))}.npz")
+            if not os.path.exists(npz):
+                np.savez(npz, W=P.A[np.ix_(inv, inv)], q=-P.b[inv], mu=P.mu)
+            spec["npz"] = npz
+        startup = 0.0
+        if self.proc is None or self.proc.poll() is not None:
+            self._start()
+            startup = 10.0  # importing numpy, scipy and siconos
+        self.proc.stdin.write(json.dumps(spec) + "\n")
+        self.proc.stdin.flush()
+        # the request: repeats stop once `budget` is spent, so one over-long solve shows as a run
+        # past limit + budget (plus loading the problem)
+        deadline = time.monotonic() + 1.2 * limit + budget + 1.0 + startup
+        line = ""
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([self.proc.stdout], [], [], max(0.0, deadline - time.monotonic()))
+            if ready:
+                line = self.proc.stdout.readline()
+                break
+        if not line:
+            crashed = self.proc.poll() is not None
+            self.stop()
+            return {"error": "crashed" if crashed else "time limit"}
+        return json.loads(line)
+
+
+_siconos: _Siconos | None = None
+
+
+class _Failure(Exception):
+    """A solve that returned nothing (crash, time limit); its message is the row's failure."""
+
+
+def _solve_siconos(path, P, solver, tol, limit, budget):
+    global _siconos
+    if _siconos is None:
+        _siconos = _Siconos()
+    out = _siconos.solve(path, P, solver, tol, limit, budget)
+    if "error" in out:
+        raise _Failure(out["error"])
+    p = _to_ours(P.contacts)
+    return out["seconds"], np.asarray(out["r"])[p], out["info"] == 0, out["iterations"]
+
+
+def _to_ours(nc: int) -> np.ndarray:
+    from ..fclib import _to_stiction_order
+
+    return _to_stiction_order(nc)
+
+
+def evaluate(case: dict) -> dict:
+    """One solve of one problem by one solver, judged by the exact law's relative residual."""
+    row = {k: case[k] for k in ("set", "problem", "solver", "ours", "tol", "time_limit")}
+    row.update(seconds=None, residual=None, converged_claimed=False, solved=False, iterations=None,
+               contacts=None, failure=None)
+    try:
+        P, problem = _load(case["path"])
+        row["contacts"] = int(P.contacts)
+        solver, tol, limit, budget = case["solver"], float(case["tol"]), float(case["time_limit"]), \
+            float(case.get("repeat_budget", 0.2))
+        if solver in OURS:
+            seconds, lam, claimed, its = _solve_ours(problem, solver, tol, limit, budget)
+        elif solver in PINOCCHIO:
+            seconds, lam, claimed, its = _solve_pinocchio(problem, solver.split("-", 1)[1], tol, limit, budget)
+        elif solver in SICONOS:
+            seconds, lam, claimed, its = _solve_siconos(case["path"], P, solver, tol, limit, budget)
+        else:
+            raise ValueError(f"unknown solver {solver!r}")
+        res = _relative_residual(problem, lam)
+        row.update(seconds=float(seconds), residual=res if math.isfinite(res) else None,
+                   converged_claimed=bool(claimed), iterations=int(its), solved=bool(res <= tol))
+        if not math.isfinite(res):
+            row["failure"] = "non-finite"
+        elif seconds > limit:
+            row["failure"] = "time limit"
+        elif not row["solved"]:
+            row["failure"] = "residual"
+    except _Failure as exc:
+        row["failure"] = str(exc)[:160]
+    except Exception as exc:  # a failing solver is data
+        row["failure"] = f"{type(exc).__name__}: {exc}"[:160]
+    return row
+
+
+# ---- profiles ---------------------------------------------------------------------------------------
+
+def effective_times(rows: list[dict]) -> dict:
+    """{(problem, solver): seconds} with a failure (not solved, or over the time limit) at +inf."""
+    out = {}
+    for r in rows:
+        ok = r["solved"] and r["seconds"] is not None and r["seconds"] <= r["time_limit"]
+        out[(r["problem"], r["solver"])] = float(r["seconds"]) if ok else math.inf
+    return out
+
+
+def performance_ratios(rows: list[dict]) -> dict:
+    """Dolan-Moré ratios r_ps = t_ps / min_s t_ps per solver (one per problem; inf when s failed
+    or no solver solved p). `rows`: one tolerance of one set."""
+    t = effective_times(rows)
+    problems = sorted({p for p, _ in t})
+    solvers = sorted({s for _, s in t})
+    best = {p: min(t.get((p, s), math.inf) for s in solvers) for p in problems}
+    return {s: [t.get((p, s), math.inf) / best[p] if math.isfinite(best[p]) else math.inf for p in problems]
+            for s in solvers}
+
+
+def rho(ratios: list[float], tau: float) -> float:
+    """rho_s(tau): the fraction of problems with r_ps <= tau (non-decreasing in tau; its limit is
+    the success rate)."""
+    return sum(r <= tau for r in ratios) / len(ratios) if ratios else 0.0
+
+
+def shifted_geometric_mean(times: list[float], shift: float = SGM_SHIFT) -> float:
+    """exp(mean log(t + shift)) - shift: a mean of times that no few tiny ones dominate."""
+    if not times:
+        return math.nan
+    return math.exp(sum(math.log(t + shift) for t in times) / len(times)) - shift
+
+
+def _tau_grid(ratios: dict) -> list[float]:
+    finite = [r for rs in ratios.values() for r in rs if math.isfinite(r)]
+    top = max(finite + [2.0])
+    return [float(x) for x in np.unique(np.concatenate([np.geomspace(1.0, top * 1.0001, 60), finite]))]
+
+
+def _budget_grid(rows: list[dict]) -> list[float]:
+    limit = max(r["time_limit"] for r in rows)
+    return [float(x) for x in np.geomspace(1e-6, limit, 61)]
+
+
+def _group_summary(rows: list[dict]) -> dict:
+    ratios = performance_ratios(rows)
+    t = effective_times(rows)
+    problems = sorted({r["problem"] for r in rows})
+    taus, budgets = _tau_grid(ratios), _budget_grid(rows)
+    per = {}
+    for s in sorted(ratios):
+        mine = [r for r in rows if r["solver"] == s]
+        limit = max(r["time_limit"] for r in mine)
+        times = [t[(p, s)] if math.isfinite(t.get((p, s), math.inf)) else limit for p in problems]
+        solved_times = [x for x in (t.get((p, s), math.inf) for p in problems) if math.isfinite(x)]
+        claims = sum(bool(r["converged_claimed"]) for r in mine)
+        false_claims = sum(bool(r["converged_claimed"]) and not r["solved"] for r in mine)
+        per[s] = {
+            "ours": bool(mine[0]["ours"]),
+            "problems": len(problems),
+            "solved": len(solved_times),
+            "success_rate": len(solved_times) / len(problems),
+            "claims": claims,
+            "false_claims": false_claims,
+            "false_convergence_rate": false_claims / len(problems),
+            # how near the misses are: a stopping test on other quantities may stop just short of tol
+            "within_10x_tol": sum(r["residual"] is not None and r["residual"] <= 10 * r["tol"] for r in mine)
+            / len(problems),
+            "sgm_seconds": shifted_geometric_mean(times),
+            "rho": [rho(ratios[s], x) for x in taus],
+            "data_profile": [sum(x <= b for x in solved_times) / len(problems) for b in budgets],
+        }
+    return {"tau": taus, "budget_seconds": budgets, "solvers": per}
+
+
+def summarize(rows: list[dict]) -> dict:
+    """Per set and tolerance: each solver's success rate, false-convergence rate (claimed converged,
+    residual above tol), shifted geometric mean time (failures at the time limit, shift SGM_SHIFT),
+    performance profile rho(tau) and data profile (fraction solved within each time budget)."""
+    out: dict = {}
+    for s in sorted({r["set"] for r in rows}):
+        for tol in sorted({r["tol"] for r in rows if r["set"] == s}, reverse=True):
+            group = [r for r in rows if r["set"] == s and r["tol"] == tol]
+            out.setdefault(s, {})[f"{tol:g}"] = _group_summary(group)
+    table = [{"set": s, "tol": tol, "solver": name, **{k: v for k, v in d.items() if k not in ("rho", "data_profile")}}
+             for s, by_tol in out.items() for tol, g in by_tol.items() for name, d in g["solvers"].items()]
+    return {"profiles": out, "table": table}
+
+
+# ---- charts -------------------------------------------------------------------------------------------
+
+def plot(rows: list[dict], out_dir, stamp: dict) -> list[Path]:
+    from .._optional import require
+
+    require("matplotlib", "plot", "the profiles charts")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .sweep import stamp_figure
+
+    summary = summarize(rows)["profiles"]
+    paths = []
+    for set_name, by_tol in summary.items():
+        tols = list(by_tol)
+        fig, axes = plt.subplots(len(tols), 3, figsize=(15, 4.2 * len(tols)), squeeze=False)
+        for i, tol in enumerate(tols):
+            g = by_tol[tol]
+            names = list(g["solvers"])
+            colours = {n: plt.cm.tab10(k % 10) for k, n in enumerate(names)}
+            ax_p, ax_d, ax_b = axes[i]
+            for n in names:
+                d = g["solvers"][n]
+                style = "-" if d["ours"] else "--"
+                ax_p.step(g["tau"], d["rho"], where="post", ls=style, color=colours[n],
+                          label=f"{n} ({d['solved']}/{d['problems']})")
+                ax_d.step(g["budget_seconds"], d["data_profile"], where="post", ls=style, color=colours[n],
+                          label=f"{n} (sgm {d['sgm_seconds'] * 1e3:.3g} ms)")
+            ax_p.set(xscale="log", xlabel="τ (time / best time on the problem)", ylabel="ρ(τ): fraction within τ",
+                     ylim=(-0.02, 1.02), title=f"{set_name}: performance profile, tol {tol}")
+            ax_d.set(xscale="log", xlabel="time budget (s)", ylabel="fraction solved",
+                     ylim=(-0.02, 1.02), title=f"{set_name}: data profile, tol {tol}")
+            x = np.arange(len(names))
+            succ = [g["solvers"][n]["success_rate"] for n in names]
+            false = [g["solvers"][n]["false_convergence_rate"] for n in names]
+            ax_b.bar(x - 0.2, succ, 0.4, label="success rate (residual ≤ tol)", color="tab:green")
+            ax_b.bar(x + 0.2, false, 0.4, label="false convergence (claimed, not solved)", color="tab:red")
+            for k, n in enumerate(names):
+                fc = g["solvers"][n]["false_claims"]
+                ax_b.text(k + 0.2, false[k] + 0.01, str(fc), ha="center", va="bottom", fontsize=7)
+            ax_b.set_xticks(x, names, rotation=30, ha="right", fontsize=8)
+            ax_b.set(ylim=(0, 1.08), title=f"{set_name}: success and false convergence, tol {tol}")
+            for ax in (ax_p, ax_d, ax_b):
+                ax.grid(alpha=0.3)
+                ax.legend(fontsize=7, loc="lower right" if ax is not ax_b else "upper right")
+        fig.suptitle(f"Solvers alone on the {set_name} problem set ({g['solvers'][names[0]]['problems']} "
+                     "problems); solved = exact-law relative residual ≤ tol, whatever the solver claims; "
+                     "failures count at the time limit", fontsize=10)
+        fig.tight_layout(rect=(0, 0.02, 1, 0.97))
+        stamp_figure(fig, stamp)
+        path = Path(out_dir) / f"profiles-{set_name}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(path)
+    return paths

@@ -1,0 +1,122 @@
+"""stiction bench profiles: the profile arithmetic on a hand-made table, the robot problem set, and the
+quick bench end to end (our solvers never claim a convergence the exact law denies)."""
+import argparse
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from stiction.bench import profiles, sweep
+
+
+def _row(problem, solver, seconds, solved, claimed=True, limit=1.0, tol=1e-8, residual=None):
+    return {"set": "s", "problem": problem, "solver": solver, "ours": solver == "a", "tol": tol,
+            "seconds": seconds, "residual": residual if residual is not None else (1e-9 if solved else 1e-3),
+            "converged_claimed": claimed, "solved": solved, "iterations": 1, "contacts": 1,
+            "time_limit": limit, "failure": None if solved else "residual"}
+
+
+def _table():
+    # p1: a 1 ms, b 2 ms, c 4 ms.  p2: a fails (false claim), b 3 ms, c 1 ms.  p3: a 1 ms, b fails,
+    # c solves but over the limit (2 s > 1 s).  p4: nobody solves it.
+    return [
+        _row("p1", "a", 1e-3, True), _row("p1", "b", 2e-3, True), _row("p1", "c", 4e-3, True),
+        _row("p2", "a", 5e-4, False, claimed=True), _row("p2", "b", 3e-3, True), _row("p2", "c", 1e-3, True),
+        _row("p3", "a", 1e-3, True), _row("p3", "b", None, False, claimed=False), _row("p3", "c", 2.0, True),
+        _row("p4", "a", 0.1, False, claimed=False), _row("p4", "b", 0.1, False, claimed=True),
+        _row("p4", "c", 0.2, False, claimed=False, residual=5e-8),
+    ]
+
+
+def test_performance_ratios_and_profiles_by_hand():
+    ratios = profiles.performance_ratios(_table())
+    inf = math.inf
+    assert ratios["a"] == [1.0, inf, 1.0, inf]
+    assert ratios["b"] == [2.0, 3.0, inf, inf]
+    assert ratios["c"] == [4.0, 1.0, inf, inf]  # p3: solved but over the time limit -> a failure
+    taus = [1.0, 1.5, 2.0, 3.0, 4.0, 1e9]
+    for s, success in (("a", 0.5), ("b", 0.5), ("c", 0.5)):
+        curve = [profiles.rho(ratios[s], t) for t in taus]
+        assert all(x <= y for x, y in zip(curve, curve[1:]))  # non-decreasing
+        assert curve[-1] == success  # ends at the success rate (p4 is in every denominator)
+    assert [profiles.rho(ratios["b"], t) for t in taus] == [0.0, 0.0, 0.25, 0.5, 0.5, 0.5]
+    summary = profiles.summarize(_table())["profiles"]["s"]["1e-08"]
+    a, b, c = (summary["solvers"][k] for k in "abc")
+    assert (a["solved"], b["solved"], c["solved"]) == (2, 2, 2)
+    assert (a["false_claims"], b["false_claims"], c["false_claims"]) == (1, 1, 0)  # p2 by a, p4 by b
+    assert a["false_convergence_rate"] == 0.25 and c["within_10x_tol"] == 1.0
+    # shifted geometric mean: failures at the 1 s limit
+    sgm = math.exp(np.mean(np.log(np.array([1e-3, 1.0, 1e-3, 1.0]) + profiles.SGM_SHIFT))) - profiles.SGM_SHIFT
+    assert a["sgm_seconds"] == pytest.approx(sgm, rel=1e-12)
+    # data profile: fraction solved within each budget, ends at the success rate
+    budgets = summary["budget_seconds"]
+    assert budgets[-1] == pytest.approx(1.0)
+    for d in (a, b, c):
+        assert all(x <= y for x, y in zip(d["data_profile"], d["data_profile"][1:]))
+        assert d["data_profile"][-1] == d["success_rate"]
+    k = next(i for i, t in enumerate(budgets) if t >= 1.5e-3)
+    assert a["data_profile"][k] == 0.5 and b["data_profile"][k] == 0.0
+
+
+def test_shifted_geometric_mean():
+    assert profiles.shifted_geometric_mean([2.0, 8.0], shift=0.0) == pytest.approx(4.0)
+    assert profiles.shifted_geometric_mean([1e-9, 1.0], shift=1.0) == pytest.approx(math.sqrt(2.0) - 1.0, rel=1e-6)
+
+
+def test_robot_problem_set_is_seeded_cached_and_large(tmp_path):
+    full = profiles.robot_problem_set(tmp_path)
+    assert len(full) >= 100
+    cats = {r["category"] for r in full}
+    assert cats >= {"standing", "slipping", "impacts", "grasps"}
+    assert len({r["name"] for r in full}) == len(full)
+    again = profiles.robot_problem_set(tmp_path)  # from the cache
+    assert [r["name"] for r in again] == [r["name"] for r in full]
+    other = profiles.robot_problem_set(tmp_path / "b", quick=True, seed=1)
+    quick = profiles.robot_problem_set(tmp_path / "c", quick=True, seed=0)
+    assert [r["name"] for r in other] != [r["name"] for r in quick]  # a different seed draws other steps
+    assert {r["category"] for r in quick} == cats
+    with pytest.raises(ValueError, match="seed"):
+        profiles.robot_problem_set(tmp_path, seed=-1)
+
+
+def _args(tmp_path, *extra):
+    parser = argparse.ArgumentParser()
+    sweep.add_common_arguments(parser)
+    profiles.add_arguments(parser)
+    return parser.parse_args(["--quick", "--problems", str(tmp_path / "problems"), *extra])
+
+
+def test_quick_bench_end_to_end(tmp_path):
+    args = _args(tmp_path, "--out", str(tmp_path / "out"))
+    result = sweep.run(profiles, args, "stiction bench profiles --quick")
+    rows = result["rows"]
+    assert {r["set"] for r in rows} == {"fclib", "robot"}
+    assert {r["tol"] for r in rows} == {1e-4, 1e-8}
+    assert len({r["solver"] for r in rows}) >= 2
+    for r in rows:
+        assert r["failure"] is not None or (math.isfinite(r["seconds"]) and math.isfinite(r["residual"]))
+        assert r["solved"] == (r["residual"] is not None and r["residual"] <= r["tol"])
+    ours = [r for r in rows if r["ours"]]
+    # on the robot set our solvers make no false claim of convergence, and solve everything
+    robot = [r for r in ours if r["set"] == "robot"]
+    assert robot and not any(r["converged_claimed"] and not r["solved"] for r in robot)
+    assert all(r["solved"] for r in robot)
+    assert not any(r["converged_claimed"] and not r["solved"] for r in ours)
+    table = {(t["set"], t["tol"], t["solver"]): t for t in result["table"]}
+    assert table[("robot", "1e-08", "default")]["success_rate"] == 1.0
+    assert table[("robot", "1e-08", "default")]["false_convergence_rate"] == 0.0
+    out = tmp_path / "out"
+    with open(out / "profiles.csv", newline="") as fh:
+        header = next(csv.reader(fh))
+    assert tuple(header) == profiles.FIELDS
+    assert (out / "profiles-fclib.png").stat().st_size > 10_000 and (out / "profiles-robot.png").is_file()
+    again = sweep.run(profiles, args, "stiction bench profiles --quick")  # resumed: nothing re-run
+    assert again["resumed"] == len(rows)
+
+
+def test_bad_options_are_loud(tmp_path):
+    for bad, match in ((["--sets", "fclib,nope"], "nope"), (["--solvers", "default,pgs"], "pgs"),
+                       (["--tols", "1e-4,-1"], "tols"), (["--time-limit", "0"], "time-limit")):
+        with pytest.raises(ValueError, match=match):
+            profiles.cases(_args(tmp_path, *bad))
