@@ -71,7 +71,6 @@ import statistics
 import subprocess
 import sys
 import time
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -80,7 +79,8 @@ import numpy as np
 import pinocchio as pin
 
 import stiction
-from stiction.robots import ROBOTS, robots_dir
+from stiction.bench import mujoco_scenes
+from stiction.robots import ROBOTS
 from stiction.simulator import PHASES, Simulator
 
 try:
@@ -99,27 +99,9 @@ REPEATS, QUICK_REPEATS = 7, 3
 
 # ---------------------------------------------------------------- MuJoCo scene
 def mujoco_model(scene, impratio: float) -> "mujoco.MjModel":
-    """The MuJoCo twin of the stiction scene (see the module docstring for every setting)."""
-    root = ET.parse(robots_dir() / ROBOT.urdf).getroot()
-    for link in root.iter("link"):
-        for tag in ("visual", "collision"):
-            for element in link.findall(tag):
-                link.remove(element)
-    ET.SubElement(ET.SubElement(root, "mujoco"), "compiler", fusestatic="false")
-    spec = mujoco.MjSpec.from_string(ET.tostring(root, encoding="unicode"))
-
-    spec.body("base_link").add_freejoint()
-    for joint in spec.joints:
-        joint.limited = mujoco.mjtLimited.mjLIMITED_FALSE
-    for foot in ROBOT.feet:
-        spec.body(foot).add_geom(name=foot, type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[ROBOT.foot_radius, 0, 0],
-                                 friction=[scene.mu, 0, 0], condim=3)
-    spec.worldbody.add_geom(name="ground", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1],
-                            friction=[scene.mu, 0, 0], condim=3)
-    for k, name in enumerate(joint_names(scene)):  # the scene's joint PD gains (20, 0.2)
-        actuator = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        actuator.set_to_position(kp=float(scene.kp[6 + k]), kv=float(scene.kd[6 + k]))
-
+    """The MuJoCo twin of the stiction scene (see the module docstring for every setting): the
+    robot, feet, ground and actuators from stiction.bench.mujoco_scenes.solo12_spec."""
+    spec = mujoco_scenes.solo12_spec(scene)
     opt = spec.option
     opt.timestep = scene.dt
     opt.gravity = scene.model.gravity.linear
@@ -132,25 +114,9 @@ def mujoco_model(scene, impratio: float) -> "mujoco.MjModel":
     return spec.compile()
 
 
-def joint_names(scene) -> list[str]:
-    """The 12 actuated joints, in Pinocchio's order."""
-    return [scene.model.names[j] for j in range(2, scene.model.njoints)]
-
-
 def mujoco_initial_state(model, scene) -> np.ndarray:
-    """stiction's q0 (Pinocchio: xyz, quaternion xyzw, joints) as a MuJoCo mjSTATE_INTEGRATION
-    vector (qpos: xyz, quaternion wxyz, joints by name; zero velocity; ctrl = the posture)."""
-    data = mujoco.MjData(model)
-    q0 = scene.q0
-    data.qpos[:3] = q0[:3]
-    data.qpos[3] = q0[6]
-    data.qpos[4:7] = q0[3:6]
-    for k, name in enumerate(joint_names(scene)):
-        data.qpos[model.joint(name).qposadr[0]] = q0[7 + k]
-        data.ctrl[model.actuator(name).id] = scene.q_target[7 + k]
-    state = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION))
-    mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
-    return state
+    """stiction's q0 as a MuJoCo mjSTATE_INTEGRATION vector, ctrl = the posture."""
+    return mujoco_scenes.solo12_state(model, scene.q0, scene.q_target)
 
 
 @dataclass
