@@ -1,0 +1,133 @@
+"""`stiction bench work-precision`: orderings that must hold on the quick sweep, the physical
+exact-law yardstick, and failure as data (never a timed assertion)."""
+import contextlib
+import csv
+import io
+import json
+import math
+
+import numpy as np
+import pytest
+
+from stiction.bench import mujoco_scenes
+from stiction.bench import work_precision as wp
+from stiction.cli import main
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    """The quick sweep through the CLI, once: (JSON result, output folder)."""
+    out = tmp_path_factory.mktemp("wp")
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(["bench", "work-precision", "--quick", "--json", "--out", str(out)]) == 0
+    return json.loads(buf.getvalue()), out
+
+
+def _rows(result, scene, method):
+    return [r for r in result["rows"] if r["scene"] == scene and r["method"] == method]
+
+
+def test_quick_sweep_outputs_are_complete_and_finite(quick):
+    result, out = quick
+    methods = [m for m in wp.QUICK_METHODS if m not in wp.MUJOCO_METHODS or mujoco_scenes.available()]
+    # two points per sweep: dt in {1, 10} ms at 1e-10, tolerance in {1e-4, 1e-10} at 1 ms
+    assert len(result["rows"]) == len(wp.QUICK_SCENES) * len(methods) * 3
+    assert result["command"].startswith("stiction bench work-precision --quick")
+    for r in result["rows"]:
+        assert set(r) == set(wp.FIELDS)
+        assert math.isfinite(r["error"]) and r["error"] >= 0.0, r
+        assert math.isfinite(r["seconds_per_simulated_second"]) and r["seconds_per_simulated_second"] > 0, r
+        assert math.isfinite(r["law_residual"]) and r["steps"] > 0
+        if r["failed"]:  # a failed run counts at the time limit
+            assert r["failure"] and r["seconds_per_simulated_second"] == pytest.approx(r["time_limit"] / r["duration"])
+        else:
+            assert r["failure"] is None and r["law_residual"] <= wp.LAW_TOLERANCE
+    with open(out / "work-precision.csv", newline="") as fh:
+        header = next(csv.reader(fh))
+    assert tuple(header) == wp.FIELDS  # the documented row schema
+    for scene in wp.QUICK_SCENES:
+        assert (out / f"work-precision-{scene}.png").stat().st_size > 10_000
+
+
+def test_incline_stick_exact_holds_and_the_soft_methods_drift(quick):
+    """Exact holds the cube on the 30 deg slope (mu = 0.6) to rounding; penalty (springs) and
+    MuJoCo (soft contacts) drift. CCP and the circumscribed pyramid coincide with exact here (every
+    contact sticks: E s(u) = 0, and the box contains the cone), so they hold it to rounding too."""
+    result, _ = quick
+    tight = [r["error"] for r in _rows(result, "cube-incline-stick", "exact") if r["tol"] == 1e-10]
+    assert len(tight) == 2 and max(tight) < 1e-11  # dt = 1 and 10 ms
+    for method in ("ccp", "pyramid"):
+        assert max(r["error"] for r in _rows(result, "cube-incline-stick", method) if r["tol"] == 1e-10) < 1e-11
+    exact = max(r["error"] for r in _rows(result, "cube-incline-stick", "exact"))  # tolerance 1e-4 too
+    assert exact < 1e-7
+    penalty = min(r["error"] for r in _rows(result, "cube-incline-stick", "penalty"))
+    assert penalty > 1e-6 and penalty > 1e3 * exact
+    if mujoco_scenes.available():
+        mj = min(r["error"] for r in _rows(result, "cube-incline-stick", "mujoco-default"))
+        assert mj > 1e-4 and mj > 1e3 * exact
+
+
+def test_slide_exact_stays_on_the_ground_and_ccp_lifts(quick):
+    result, _ = quick
+    exact = _rows(result, "cube-slide", "exact")
+    assert max(r["max_normal_velocity"] for r in exact if r["tol"] == 1e-10) < 1e-9
+    # the stop at v0^2 / (2 mu g) - v0 dt / 2: O(dt^2) from the step the cube stops in
+    assert max(r["error"] for r in exact if r["dt"] == 1e-3) < 1e-6
+    ccp = _rows(result, "cube-slide", "ccp")
+    assert min(r["max_normal_velocity"] for r in ccp) > 0.1  # u_n = mu |u_t| at every sliding step
+    # ccp meets its own stopping test at every step, yet fails by the exact law: our measure decides
+    assert all(r["own_unconverged_steps"] == 0 and r["failed"] and r["failure"] == "exact-law residual" for r in ccp)
+    assert all(not r["failed"] for r in exact)
+
+
+def test_law_violation_is_zero_exactly_on_the_law():
+    f_ref, v_ref, mu = 10.0, 1.0, 0.5
+    # sliding along +t1 with the friction on the cone opposite; sticking inside the cone; open
+    lam_n = np.array([4.0, 4.0, 0.0])
+    lam_t = np.array([[-2.0, 0.0], [1.0, -0.5], [0.0, 0.0]])
+    u_n = np.array([0.0, 0.0, 0.3])
+    u_t = np.array([[0.7, 0.0], [0.0, 0.0], [0.2, 0.1]])
+    assert np.allclose(wp.law_violation(lam_n, lam_t, u_n, u_t, mu, f_ref, v_ref), 0.0, atol=1e-15)
+    # CCP's lift-off u_n = mu |u_t| on the sliding contact: min(lam_n / f_ref, |u_n| / v_ref) = 0.35
+    v = wp.law_violation(lam_n[:1], lam_t[:1], [0.35], u_t[:1], mu, f_ref, v_ref)
+    assert v[0] == pytest.approx(0.35)
+    # friction beyond the cone while sticking: (|lam_t| - mu lam_n) / f_ref
+    v = wp.law_violation([4.0], [[3.0, 0.0]], [0.0], [[0.0, 0.0]], mu, f_ref, v_ref)
+    assert v[0] == pytest.approx(0.1)
+    # sliding with the friction at 90 deg to the slip: the smaller of the slip's speed and the
+    # force's distance to maximum dissipation
+    v = wp.law_violation([4.0], [[0.0, -2.0]], [0.0], [[0.01, 0.0]], mu, f_ref, v_ref)
+    assert v[0] == pytest.approx(0.01)
+
+
+def test_pinch_holds_exactly_and_drops_without_friction_enough():
+    case = {"scene": "pinch", "method": "exact", "dt": 1e-3, "tol": 1e-10, "duration": 0.2, "time_limit": 30.0,
+            "law_tolerance": wp.LAW_TOLERANCE, "seed": 0}
+    row = wp.evaluate(case)
+    assert not row["failed"] and row["error"] < 1e-9 and row["law_residual"] < 1e-9
+    penalty = wp.evaluate({**case, "method": "penalty"})
+    assert penalty["error"] > 1e-6  # its springs let the cube sink
+    from stiction.simulator import Simulator
+
+    sim = Simulator("pinch", mu=0.2)  # 2 mu F = 8 N < m g: the exact law lets it slide down
+    traj = sim.rollout(0.2)
+    a, t, h = 9.81 - 2 * 0.2 * 20.0, 0.2, sim.dt  # the pads' 20 N each (kp 2000 N/m x 1 cm)
+    assert traj.q[0, 4] - traj.q[-1, 4] == pytest.approx(a * t * t / 2 + a * h * t / 2, rel=1e-6)
+
+
+def test_time_limit_and_bad_input_are_data_or_errors():
+    case = {"scene": "cube-slide", "method": "exact", "dt": 1e-3, "tol": 1e-10, "duration": 0.3, "time_limit": 1e-9,
+            "law_tolerance": wp.LAW_TOLERANCE, "seed": 0}
+    row = wp.evaluate(case)
+    assert row["failed"] and row["failure"] == "time-limit"
+    assert row["seconds_per_simulated_second"] == pytest.approx(1e-9 / 0.3)
+    with pytest.raises(ValueError, match="unknown scene"):
+        wp.evaluate({**case, "scene": "cube-slid"})
+    with pytest.raises(ValueError, match="unknown method"):
+        wp.evaluate({**case, "method": "exact-gs"})
+
+
+def test_bad_options_are_refused(capsys):
+    assert main(["bench", "work-precision", "--quick", "--time-limit", "-1", "--json"]) == 2
+    assert "--time-limit" in capsys.readouterr().err
