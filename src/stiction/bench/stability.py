@@ -527,21 +527,27 @@ def plot(rows: list[dict], out_dir: Path, stamp: dict) -> list[Path]:
         xlabel, ylabel, xlog, ylog = AXES[m]
         ncol = min(4, len(methods))
         nrow = math.ceil(len(methods) / ncol)
-        fig, axes = plt.subplots(nrow, ncol, figsize=(3.3 * ncol + 0.5, 3.0 * nrow + 1.3), squeeze=False)
+        fig, axes = plt.subplots(nrow, ncol, figsize=(max(9.0, 3.3 * ncol + 0.5), 3.0 * nrow + 1.7), squeeze=False)
         xe, ye = _edges(xs, xlog), _edges(ys, ylog)
         for k, method in enumerate(methods):
             ax = axes[k // ncol][k % ncol]
+            prow = [r for r in mrows if r["method"] == method]
+            fails = {id(r): [f for f in (r["failures"] or "").split("|") if f] for r in prow}
+            # a mode that fires in every cell says nothing about the map's axes: it is named in the
+            # title and a cell's colour is its first *other* mode, if any (the letters show them all)
+            everywhere = [f for f in FAILURE_MODES if all(f in fl for fl in fails.values())]
+            everywhere = everywhere if any(set(fl) - set(everywhere) for fl in fails.values()) else []
             grid = np.full((len(ys), len(xs)), np.nan)
-            for r in mrows:
-                if r["method"] != method:
-                    continue
+            for r in prow:
                 i, j = ys.index(r["y"]), xs.index(r["x"])
-                grid[i, j] = order.index(r["failure"] if r["failure"] else None)
-                codes = " ".join(SHORT[f] for f in (r["failures"] or "").split("|") if f)
+                shown = [f for f in fails[id(r)] if f not in everywhere] or fails[id(r)]
+                first = shown[0] if shown else None
+                grid[i, j] = order.index(first)
+                codes = " ".join(SHORT[f] for f in fails[id(r)])
                 ax.text(np.sqrt(xe[j] * xe[j + 1]) if xlog else (xe[j] + xe[j + 1]) / 2,
                         np.sqrt(ye[i] * ye[i + 1]) if ylog else (ye[i] + ye[i + 1]) / 2,
                         codes, ha="center", va="center", fontsize=6,
-                        color="white" if r["failure"] in ("non-finite", "residual", "own-solver-failed") else "black")
+                        color="white" if first in ("non-finite", "residual", "own-solver-failed") else "black")
             ax.pcolormesh(xe, ye, np.ma.masked_invalid(grid), cmap=cmap, vmin=-0.5, vmax=len(order) - 0.5,
                           edgecolors="white", linewidth=0.5)
             _boundary(ax, m, xs, ys, mrows)
@@ -551,7 +557,7 @@ def plot(rows: list[dict], out_dir: Path, stamp: dict) -> list[Path]:
                 ax.set_yscale("log")
             ax.set_xlim(xe[0], xe[-1])
             ax.set_ylim(ye[0], ye[-1])
-            ax.set_title(method, fontsize=9)
+            ax.set_title(method + (f"  (every cell: {', '.join(everywhere)})" if everywhere else ""), fontsize=8)
             ax.set_xlabel(xlabel, fontsize=7)
             ax.set_ylabel(ylabel, fontsize=7)
             ax.tick_params(labelsize=6)
@@ -560,10 +566,13 @@ def plot(rows: list[dict], out_dir: Path, stamp: dict) -> list[Path]:
         for k in range(len(methods), nrow * ncol):
             axes[k // ncol][k % ncol].axis("off")
         handles = [Patch(color=COLORS[k], label=("passes" if k is None else f"{k} ({SHORT[k]})")) for k in order]
-        fig.legend(handles=handles, loc="upper center", ncol=5, fontsize=7, frameon=False)
         fig.suptitle(f"stability map: {m} (colour = first failure mode; letters = every mode that fired)",
                      fontsize=9, y=0.995)
-        fig.tight_layout(rect=(0, 0.03, 1, 0.9))
+        fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.965), ncol=5, fontsize=7,
+                   frameon=False)
+        h = fig.get_figheight()
+        fig.subplots_adjust(left=0.07, right=0.98, top=1.0 - 0.95 / h, bottom=0.75 / h, wspace=0.3,
+                            hspace=0.75 / 3.0 * 1.6)
         stamp_figure(fig, stamp)
         path = out_dir / f"stability-{m}.png"
         fig.savefig(path, dpi=130)
