@@ -248,8 +248,8 @@ def _run_stiction(case: dict, sc) -> dict:
     else:
         overrides["tolerance"] = tol
     sim = _stiction_simulator(sc, overrides)
-    mode_adaptive = method == "ode-adaptive"
-    chunk = duration if mode_adaptive else max(dt, min(duration, round(0.1 / dt) * dt))
+    # chunks of ~0.1 s simulated: the time limit is checked between them
+    chunk = max(dt, min(duration, round(0.1 / dt) * dt))
     trajs, wall, stopped = [], 0.0, None
     simulated = 0.0
     while simulated < duration - 1e-9 and stopped is None:
@@ -502,10 +502,12 @@ def plot(rows: list[dict], out_dir: Path, stamp: dict) -> list[Path]:
         limit = max(float(r["time_limit"]) / float(r["duration"]) for r in mine)
         fig, ax = plt.subplots(figsize=(9, 6))
         for i, m in enumerate(methods):
-            color, marker = f"C{i % 10}", "osD^v<>ph*"[i // 10 % 10]
+            color, marker = plt.get_cmap("tab20")(i % 20), "osD^v<>ph*"[i % 10]
             good = [r for r in ok if r["method"] == m]
-            dt_sweep = sorted((r for r in good if float(r["tol"]) == BASE_TOL or m == "ode-adaptive"),
-                              key=lambda r: float(r["dt"]))
+            if m == "ode-adaptive":  # its sweep is the local error tolerance, at one first step
+                dt_sweep = sorted(good, key=lambda r: -float(r["tol"]))
+            else:
+                dt_sweep = sorted((r for r in good if float(r["tol"]) == BASE_TOL), key=lambda r: float(r["dt"]))
             tol_sweep = sorted((r for r in good if float(r["dt"]) == BASE_DT), key=lambda r: float(r["tol"]))
             label = m
             if dt_sweep:
