@@ -94,7 +94,8 @@ class MujocoTwin:
         for j in self.joints:
             if j.kind == "free":
                 world = j.root * pin.XYZQUATToSE3(q[j.idx_q:j.idx_q + 7])
-                quat = pin.Quaternion(world.rotation).coeffs()  # x, y, z, w
+                quat = q[j.idx_q + 3:j.idx_q + 7] if np.allclose(j.root.rotation, np.eye(3)) else \
+                    pin.Quaternion(world.rotation).coeffs()  # x, y, z, w (the given sign kept)
                 out[j.qposadr:j.qposadr + 3] = world.translation
                 out[j.qposadr + 3:j.qposadr + 7] = [quat[3], quat[0], quat[1], quat[2]]
                 mj.mju_normalize4(out[j.qposadr + 3:j.qposadr + 7])

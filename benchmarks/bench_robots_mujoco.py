@@ -1,0 +1,323 @@
+#!/usr/bin/env python
+"""Benchmark: every bundled robot scene, one step of stiction against MuJoCo 4.0, in one process.
+
+Usage:  python benchmarks/bench_robots_mujoco.py [--quick] [--repeats N] [--scenes A B ...]
+            [--duration S] [--impratio R ...] [--out FILE] [--json]
+
+MuJoCo is the optional ``bench`` extra (``mujoco==4.0.*``): without it the script says so and
+exits 0.
+
+Scenes (default): solo12-stand, go2-stand, anymal-stand, talos-stand, ur5-push-wall,
+ur5-push-box. The MuJoCo twin of each is built by ``stiction.bench.mujoco_robots.mujoco_twin``
+from the scene's own Pinocchio model (same masses, inertias, joint frames, contact spheres and
+points on the same links, joint PD, initial state, dt, μ, gravity); MuJoCo: elliptic cones,
+Newton, 100 iterations, tolerance 1e-10, implicitfast, impratio 1 (and any ``--impratio``), its
+default solref/solimp. stiction: the scene as bundled (exact Coulomb NCP, eq. 65, to 1e-10 at
+every step, warm-started).
+
+Timing (wall clock, one process, single thread; the machine may be shared, so the two
+simulators of one scene run back to back, their order swapped every repetition, and the
+scenes' order rotated): per repetition and scene,
+
+- the C++ loops end to end (the goal's measure): ``Simulator(scene).rollout(D)`` (records q, v,
+  λ, gaps, residuals, timings, builds the numpy Trajectory) and ``mujoco.rollout.rollout``
+  (records the full physics state), wall / steps;
+- one step at a time from Python, each step timed alone and the median over steps taken (robust
+  to the machine's other work): stiction ``_core.step`` and MuJoCo ``mj_step`` — both include
+  one Python → C++ call;
+- stiction's own C++ step timer (median over steps) and its phases.
+
+Reported: the median over repetitions (and min–max), and the ratio stiction / MuJoCo paired per
+repetition (median, min–max). Each repetition starts from a fresh Simulator / reset MjData.
+
+Accuracy (from the last repetition's rollouts; the same code measures both, from the
+configurations alone: ``mujoco_robots.contact_accuracy``): drift — the largest displacement of
+a closed contact along its half-space from the settle time to the end (sphere centres: rolling
+counts); penetration — the deepest gap below zero over the run. stiction's convergence and
+largest NCP residual are shown beside.
+
+Output: Markdown on stdout (and ``--out FILE``), or JSON with ``--json``; progress on stderr.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+import stiction
+from stiction import _core
+from stiction.bench import mujoco_robots
+from stiction.simulator import PHASES, Simulator
+
+SCENES = ("solo12-stand", "go2-stand", "anymal-stand", "talos-stand", "ur5-push-wall", "ur5-push-box")
+DURATION = 2.0  # s
+REPEATS, QUICK_REPEATS = 9, 3
+
+
+class Case:
+    """One scene in both simulators, ready to time."""
+
+    def __init__(self, scene_name: str, duration: float, impratios: tuple[float, ...]):
+        import mujoco
+
+        self.name = scene_name
+        self.scene = Simulator(scene_name).scene
+        self.n = int(round(duration / self.scene.dt))
+        self.duration = self.n * self.scene.dt
+        self.twins = {r: mujoco_robots.mujoco_twin(self.scene, impratio=r) for r in impratios}
+        self.datas = {r: mujoco.MjData(t.model) for r, t in self.twins.items()}
+        self.state0 = {r: t.initial_state(self.scene.q0, self.scene.v0) for r, t in self.twins.items()}
+        self.last: dict = {}
+
+    # ---- stiction
+    def stiction_rollout(self) -> float:
+        sim = Simulator(self.scene)
+        t0 = time.perf_counter()
+        traj = sim.rollout(self.duration)
+        us = (time.perf_counter() - t0) / self.n * 1e6
+        self.last["stiction"] = (sim, traj)
+        return us
+
+    def stiction_steps(self) -> float:
+        sim = Simulator(self.scene)
+        step, model, data, clock = _core.step, sim.model, sim.data, time.perf_counter_ns
+        times = np.empty(self.n)
+        for k in range(self.n):
+            t0 = clock()
+            step(model, data)
+            times[k] = clock() - t0
+        self.last["stiction_q_end"] = np.asarray(data.q)
+        return float(np.median(times)) / 1e3
+
+    # ---- MuJoCo
+    def mujoco_rollout(self, impratio: float) -> float:
+        import mujoco
+        import mujoco.rollout
+
+        twin, data = self.twins[impratio], self.datas[impratio]
+        mujoco.mj_resetData(twin.model, data)
+        control = twin.ctrl.reshape(1, 1, -1) if twin.model.nu else None
+        t0 = time.perf_counter()
+        states, _ = mujoco.rollout.rollout(twin.model, data, self.state0[impratio], control, nstep=self.n)
+        us = (time.perf_counter() - t0) / self.n * 1e6
+        self.last[("mujoco", impratio)] = states[0, :, 1:1 + twin.model.nq]  # FULLPHYSICS: time, qpos, ...
+        return us
+
+    def mujoco_steps(self, impratio: float) -> float:
+        import mujoco
+
+        twin, data = self.twins[impratio], self.datas[impratio]
+        mujoco.mj_resetData(twin.model, data)
+        mujoco.mj_setState(twin.model, data, self.state0[impratio], mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        data.ctrl[:] = twin.ctrl
+        step, model, clock = mujoco.mj_step, twin.model, time.perf_counter_ns
+        times = np.empty(self.n)
+        for k in range(self.n):
+            t0 = clock()
+            step(model, data)
+            times[k] = clock() - t0
+        self.last[("mujoco_qpos_end", impratio)] = data.qpos.copy()
+        return float(np.median(times)) / 1e3
+
+    # ---- accuracy (last rollouts)
+    def accuracy(self) -> dict:
+        sim, traj = self.last["stiction"]
+        summary = sim.summary(traj)
+        out = {"stiction": {**mujoco_robots.contact_accuracy(self.scene, traj.t, traj.q),
+                            "converged": summary["all_converged"], "max_residual": summary["max_residual"],
+                            "phases_us": dict(zip(PHASES, (float(x) for x in np.median(traj.timings[1:], axis=0))))}}
+        t = np.arange(self.n + 1) * self.scene.dt
+        for r, twin in self.twins.items():
+            qpos = self.last[("mujoco", r)]
+            Q = np.vstack([self.scene.q0, twin.q_from_qpos(qpos, self.scene.model.nq)])
+            acc = mujoco_robots.contact_accuracy(self.scene, t, Q)
+            # the step-by-step run and mujoco.rollout end in the same state (same model, control)
+            acc["rollout_vs_steps"] = float(np.abs(qpos[-1] - self.last[("mujoco_qpos_end", r)]).max())
+            out[f"mujoco impratio {r:g}"] = acc
+        return out
+
+
+def git_revision() -> str:
+    root = Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "-C", root, "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                              check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", root, "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "git revision unknown"
+    return f"git {head}{' + local changes' if dirty else ''}"
+
+
+def machine() -> str:
+    with open("/proc/cpuinfo") as f:
+        cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")),
+                   platform.processor() or "?")
+    return f"{platform.machine()} ({cpu}, {os.cpu_count()} cores)"
+
+
+def spread(values: list[float]) -> dict:
+    return {"median": statistics.median(values), "min": min(values), "max": max(values), "all": list(values)}
+
+
+def run(scenes: list[str], repeats: int, duration: float, impratios: tuple[float, ...]) -> dict:
+    import mujoco
+
+    load_start = os.getloadavg()
+    cases = [Case(s, duration, impratios) for s in scenes]
+    timers = {}
+    for c in cases:
+        timers[c.name] = {"stiction rollout": c.stiction_rollout, "stiction steps": c.stiction_steps}
+        for r in impratios:
+            timers[c.name][f"mujoco {r:g} rollout"] = lambda c=c, r=r: c.mujoco_rollout(r)
+            timers[c.name][f"mujoco {r:g} steps"] = lambda c=c, r=r: c.mujoco_steps(r)
+    for fns in timers.values():  # one untimed warm-up of each
+        for fn in fns.values():
+            fn()
+    times = {s: {k: [] for k in fns} for s, fns in timers.items()}
+    for rep in range(repeats):
+        k = rep % len(cases)
+        for c in cases[k:] + cases[:k]:
+            # each kind (rollout, steps) back to back in both simulators, order swapped every repetition
+            for kind in ("rollout", "steps"):
+                names = [n for n in timers[c.name] if n.endswith(kind)]
+                if rep % 2:
+                    names.reverse()
+                for n in names:
+                    times[c.name][n].append(timers[c.name][n]())
+        print(f"repetition {rep + 1}/{repeats}: " + ", ".join(
+            f"{c.name} {times[c.name]['stiction rollout'][-1] / times[c.name][f'mujoco {impratios[0]:g} rollout'][-1]:.2f}"
+            for c in cases), file=sys.stderr, flush=True)
+    rows = []
+    for c in cases:
+        t = times[c.name]
+        row = {"scene": c.name, "nv": int(c.scene.model.nv), "contacts": len(c.scene.contacts), "steps": c.n,
+               "us": {n: spread(v) for n, v in t.items()}, "ratio": {}, "accuracy": c.accuracy()}
+        for r in impratios:
+            for kind in ("rollout", "steps"):
+                paired = [a / b for a, b in zip(t[f"stiction {kind}"], t[f"mujoco {r:g} {kind}"])]
+                row["ratio"][f"{kind} vs impratio {r:g}"] = spread(paired)
+        rows.append(row)
+    return {
+        "command": " ".join([Path(sys.argv[0]).name] + sys.argv[1:]),
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "machine": machine(), "load_average_start": load_start[0], "load_average_end": os.getloadavg()[0],
+        "versions": {"python": platform.python_version(), "stiction": stiction.__version__, "git": git_revision(),
+                     "pinocchio": pin.__version__, "mujoco": mujoco.mj_versionString(), "numpy": np.__version__},
+        "repeats": repeats, "duration": duration, "impratios": list(impratios), "rows": rows,
+    }
+
+
+def markdown(res: dict) -> str:
+    r0 = res["impratios"][0]
+    v = res["versions"]
+    lines = [
+        "# Every bundled robot: one step of stiction against MuJoCo 4.0",
+        "",
+        f"Measured {res['date']} on {res['machine']}, load average {res['load_average_start']:.2f} at start and "
+        f"{res['load_average_end']:.2f} at the end; Python {v['python']}, stiction {v['stiction']} ({v['git']}, "
+        f"Pinocchio {v['pinocchio']}), MuJoCo {v['mujoco']}, numpy {v['numpy']}. `{res['command']}`: "
+        f"{res['duration']:g} s per scene, {res['repeats']} alternating repetitions, single thread, medians "
+        "(min–max over repetitions).",
+        "",
+        f"## Time per step (µs), MuJoCo impratio {r0:g}",
+        "",
+        "| scene | nv | contacts | stiction rollout | MuJoCo rollout | **ratio** (paired) | stiction step | MuJoCo step "
+        "| ratio (paired) | stiction C++ step timer |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+
+    def cell(s: dict, spec: str = ".1f") -> str:
+        return f"{s['median']:{spec}} ({s['min']:{spec}}–{s['max']:{spec}})"
+
+    for row in res["rows"]:
+        us, ratio = row["us"], row["ratio"]
+        cpp = row["accuracy"]["stiction"]["phases_us"]["total"]
+        lines.append(f"| {row['scene']} | {row['nv']} | {row['contacts']} | {cell(us['stiction rollout'])} | "
+                     f"{cell(us[f'mujoco {r0:g} rollout'])} | **{cell(ratio[f'rollout vs impratio {r0:g}'], '.2f')}** | "
+                     f"{cell(us['stiction steps'])} | {cell(us[f'mujoco {r0:g} steps'])} | "
+                     f"{cell(ratio[f'steps vs impratio {r0:g}'], '.2f')} | {cpp:.1f} |")
+    for r in res["impratios"][1:]:
+        lines += ["", f"MuJoCo impratio {r:g}: ratio rollout / step: " + "; ".join(
+            f"{row['scene']} {row['ratio'][f'rollout vs impratio {r:g}']['median']:.2f} / "
+            f"{row['ratio'][f'steps vs impratio {r:g}']['median']:.2f}" for row in res["rows"])]
+    lines += [
+        "",
+        "rollout: the C++ loop end to end, wall / steps (stiction records q, v, λ, gaps, residuals and timings; "
+        "MuJoCo its full physics state). step: each step called from Python and timed alone, median over the "
+        "steps. ratio: stiction / MuJoCo per repetition (the two ran back to back), median and range.",
+        "",
+        "## stiction's phases (median µs per step over the last rollout)",
+        "",
+        "| scene | " + " | ".join(PHASES) + " |",
+        "|---|" + "---:|" * len(PHASES),
+    ]
+    for row in res["rows"]:
+        ph = row["accuracy"]["stiction"]["phases_us"]
+        lines.append(f"| {row['scene']} | " + " | ".join(f"{ph[p]:.1f}" for p in PHASES) + " |")
+    labels = [k for k in res["rows"][0]["accuracy"]]
+    lines += [
+        "",
+        "## Accuracy over the same run (same measure for both, from the configurations)",
+        "",
+        "| scene | " + " | ".join(f"{lab}: drift [m] | {lab}: penetration [m]" for lab in labels) + " | stiction converged, max residual |",
+        "|---|" + "---:|---:|" * len(labels) + "---|",
+    ]
+    for row in res["rows"]:
+        acc = row["accuracy"]
+        s = acc["stiction"]
+        lines.append(f"| {row['scene']} | " + " | ".join(f"{acc[lab]['drift']:.2e} | {acc[lab]['penetration']:.2e}"
+                                                         for lab in labels)
+                     + f" | {s['converged']}, {s['max_residual']:.1e} |")
+    lines += [
+        "",
+        "drift: the largest displacement, along its half-space, of a contact closed at the settle time and at the "
+        "end, from the settle time on (sphere centres, so rolling counts; ur5-push-box: in the crate's frame for "
+        "the tool on the crate face, and the crate's corners are pushed 15 cm on purpose). MuJoCo's "
+        "`mujoco.rollout` and its step-by-step run end in the same state: max |Δqpos| = "
+        + ", ".join(f"{row['scene']} {max(a.get('rollout_vs_steps', 0.0) for a in row['accuracy'].values()):.1e}"
+                    for row in res["rows"]) + ".",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help=f"{QUICK_REPEATS} repetitions, 1.5 s per scene")
+    ap.add_argument("--repeats", type=int, help=f"repetitions (default {REPEATS}; at least 1)")
+    ap.add_argument("--scenes", nargs="+", default=list(SCENES), help="scene names (default: every robot scene)")
+    ap.add_argument("--duration", type=float, help=f"simulated seconds per run (default {DURATION:g})")
+    ap.add_argument("--impratio", type=float, nargs="+", default=[1.0], help="MuJoCo impratio(s) (default 1)")
+    ap.add_argument("--out", type=Path, help="also write the Markdown report to this file")
+    ap.add_argument("--json", action="store_true", help="print JSON instead of Markdown")
+    args = ap.parse_args(argv)
+    if not mujoco_robots.available():
+        print("bench_robots_mujoco: MuJoCo is not installed (the optional `bench` extra: "
+              "pip install 'mujoco==4.0.*'); nothing to compare, skipping.")
+        return 0
+    repeats = args.repeats if args.repeats is not None else QUICK_REPEATS if args.quick else REPEATS
+    if repeats < 1:
+        raise ValueError(f"--repeats must be >= 1, got {repeats}")
+    duration = args.duration if args.duration is not None else 1.5 if args.quick else DURATION
+    if not duration > 0:
+        raise ValueError(f"--duration must be > 0, got {duration}")
+    res = run(args.scenes, repeats, duration, tuple(args.impratio))
+    text = markdown(res)
+    if args.out:
+        args.out.write_text(text)
+    print(json.dumps(res, indent=1) if args.json else text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
