@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from stiction.bench import stability as st
-from stiction.bench import sweep
 
 
 def run(map_, method, x, y):
@@ -117,13 +116,18 @@ def test_bad_input_is_loud():
         st.stack_scene(-1.0, False)
 
 
-def test_quick_sweep_writes_csv_png_and_finite_rows(tmp_path):
-    """Through the framework: the CSV's columns are FIELDS, one row per case, finite numbers, a
-    chart per map; a second run resumes (every case already in the CSV)."""
-    args = argparse.Namespace(quick=True, maps="incline,tower,ode", methods="exact,ccp", out=str(tmp_path),
-                              json=True, cluster=None, workers=1)
-    res = sweep.run(st, args, "stiction bench stability --quick")
-    cases = st.cases(args)
+def test_quick_sweep_through_the_cli_writes_csv_png_and_finite_rows(tmp_path, capsys):
+    """`stiction bench stability --quick --json --out DIR`: the CSV's columns are FIELDS, one row per
+    case, finite numbers, a chart per map; a second run resumes (every case already in the CSV)."""
+    import json
+
+    from stiction.cli import main
+
+    argv = ["bench", "stability", "--quick", "--maps", "incline,tower,ode", "--methods", "exact,ccp",
+            "--workers", "1", "--json", "--out", str(tmp_path)]
+    assert main(argv) in (0, None)
+    res = json.loads(capsys.readouterr().out)
+    cases = st.cases(argparse.Namespace(quick=True, maps="incline,tower,ode", methods="exact,ccp"))
     assert len(res["rows"]) == len(cases) == 4 * 2 + 4 * 2 + 4
     with open(tmp_path / "stability.csv", newline="") as fh:
         header = next(csv.reader(fh))
@@ -141,5 +145,5 @@ def test_quick_sweep_writes_csv_png_and_finite_rows(tmp_path):
         assert tower[("exact", n, 1e-8)]["failure"] is None
         assert tower[("exact", n, 1e-4)]["residual"] > 100 * tower[("exact", n, 1e-8)]["residual"]
     assert res["maps"]["incline"]["exact"]["failed"] == 0
-    again = sweep.run(st, args, "stiction bench stability --quick")
-    assert again["resumed"] == len(cases)
+    assert main(argv) in (0, None)
+    assert json.loads(capsys.readouterr().out)["resumed"] == len(cases)
