@@ -48,6 +48,16 @@ of v_ref, a gross violation: accuracy is the chart's x axis) -- never by the met
 convergence flag (recorded as ``own_unconverged_steps``). A failed run counts at the time limit
 (``seconds_per_simulated_second`` = limit / duration; the measured value is kept) and is drawn as a
 cross on the chart's top edge.
+
+**Rows** (CSV columns = ``FIELDS``, in order): ``scene``, ``method``, ``dt`` (s), ``tol``; ``error``
+(m; None/NaN when the run stopped); ``seconds_per_simulated_second`` (the limit's for a failed
+run); ``failed``; ``failure`` (None, "exact-law residual", "penetration", "time-limit",
+"non-finite", "stopped: <message>" or "error: <exception>"); ``law_residual`` (the physical
+exact-law residual above); ``max_normal_velocity`` (m/s, the largest |u_n| of a loaded contact
+sliding faster than 1 um/s: the lift-off of eq. 78-79); ``penetration`` (m); ``steps``;
+``own_unconverged_steps`` (steps that missed the method's own test: reported, not judged);
+``duration`` (s simulated); ``measured_seconds_per_simulated_second``; ``time_limit`` (wall s);
+``seed`` (the cases are deterministic: 0).
 """
 from __future__ import annotations
 
