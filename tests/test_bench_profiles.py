@@ -2,11 +2,13 @@
 quick bench end to end (our solvers never claim a convergence the exact law denies)."""
 import argparse
 import csv
+import json
 import math
 
 import numpy as np
 import pytest
 
+from stiction import cli
 from stiction.bench import profiles, sweep
 
 
@@ -64,7 +66,13 @@ def test_shifted_geometric_mean():
     assert profiles.shifted_geometric_mean([1e-9, 1.0], shift=1.0) == pytest.approx(math.sqrt(2.0) - 1.0, rel=1e-6)
 
 
-def test_robot_problem_set_is_seeded_cached_and_large(tmp_path):
+@pytest.fixture(scope="module")
+def problem_dir(tmp_path_factory):
+    """One cache of robot problem sets for the module (the quick set is built once)."""
+    return tmp_path_factory.mktemp("problems")
+
+
+def test_robot_problem_set_is_seeded_cached_and_large(tmp_path, problem_dir):
     full = profiles.robot_problem_set(tmp_path)
     assert len(full) >= 100
     cats = {r["category"] for r in full}
@@ -73,22 +81,22 @@ def test_robot_problem_set_is_seeded_cached_and_large(tmp_path):
     again = profiles.robot_problem_set(tmp_path)  # from the cache
     assert [r["name"] for r in again] == [r["name"] for r in full]
     other = profiles.robot_problem_set(tmp_path / "b", quick=True, seed=1)
-    quick = profiles.robot_problem_set(tmp_path / "c", quick=True, seed=0)
+    quick = profiles.robot_problem_set(problem_dir, quick=True, seed=0)
     assert [r["name"] for r in other] != [r["name"] for r in quick]  # a different seed draws other steps
     assert {r["category"] for r in quick} == cats
     with pytest.raises(ValueError, match="seed"):
         profiles.robot_problem_set(tmp_path, seed=-1)
 
 
-def _args(tmp_path, *extra):
+def _args(problem_dir, *extra):
     parser = argparse.ArgumentParser()
     sweep.add_common_arguments(parser)
     profiles.add_arguments(parser)
-    return parser.parse_args(["--quick", "--problems", str(tmp_path / "problems"), *extra])
+    return parser.parse_args(["--quick", "--problems", str(problem_dir), *extra])
 
 
-def test_quick_bench_end_to_end(tmp_path):
-    args = _args(tmp_path, "--out", str(tmp_path / "out"))
+def test_quick_bench_end_to_end(tmp_path, problem_dir, capsys):
+    args = _args(problem_dir, "--out", str(tmp_path / "out"))
     result = sweep.run(profiles, args, "stiction bench profiles --quick")
     rows = result["rows"]
     assert {r["set"] for r in rows} == {"fclib", "robot"}
@@ -111,12 +119,17 @@ def test_quick_bench_end_to_end(tmp_path):
         header = next(csv.reader(fh))
     assert tuple(header) == profiles.FIELDS
     assert (out / "profiles-fclib.png").stat().st_size > 10_000 and (out / "profiles-robot.png").is_file()
-    again = sweep.run(profiles, args, "stiction bench profiles --quick")  # resumed: nothing re-run
-    assert again["resumed"] == len(rows)
+    # the same through the CLI: resumed from the CSV (nothing re-run), the JSON on stdout
+    code = cli.main(["bench", "profiles", "--quick", "--json", "--problems", str(problem_dir),
+                     "--out", str(out)])
+    assert code == 0
+    again = json.loads(capsys.readouterr().out)
+    assert again["resumed"] == len(rows) and len(again["rows"]) == len(rows)
+    assert again["table"] == json.loads(json.dumps(result["table"]))
 
 
-def test_bad_options_are_loud(tmp_path):
+def test_bad_options_are_loud(problem_dir):
     for bad, match in ((["--sets", "fclib,nope"], "nope"), (["--solvers", "default,pgs"], "pgs"),
                        (["--tols", "1e-4,-1"], "tols"), (["--time-limit", "0"], "time-limit")):
         with pytest.raises(ValueError, match=match):
-            profiles.cases(_args(tmp_path, *bad))
+            profiles.cases(_args(problem_dir, *bad))

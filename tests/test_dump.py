@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import stiction
-from stiction import _core, dump, fclib
+from stiction import cli, dump, fclib
 from stiction.simulator import Simulator
 
 
@@ -82,6 +82,14 @@ def test_cli_contract(tmp_path, capsys):
     assert all(r["solver"] == "nsgs" for r in out["files"])
     assert sorted(p.name for p in (tmp_path / "d").iterdir()) == ["solo12-stand-step000003.hdf5",
                                                                    "solo12-stand-step000006.hdf5"]
+
+
+def test_stiction_dump_command(tmp_path, capsys):
+    code = cli.main(["dump", "cube-incline-slip", "--steps", "4", "--every", "2", "--out", str(tmp_path)])
+    assert code == 0 and "2 problem(s)" in capsys.readouterr().out
+    assert fclib.load(tmp_path / "cube-incline-slip-step000004.hdf5").contacts == 4
+    assert cli.main(["dump", "cube-slide", "--steps", "0", "--out", str(tmp_path)]) == 2
+    assert "steps" in capsys.readouterr().err
 
 
 def test_bad_input_is_loud(tmp_path):
