@@ -80,13 +80,13 @@ class Case:
         self.last: dict = {}
 
     # ---- stiction
-    def stiction_rollout(self) -> float:
+    def stiction_rollout(self) -> tuple[float, float]:
         sim = Simulator(self.scene)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         traj = sim.rollout(self.duration)
-        us = (time.perf_counter() - t0) / self.n * 1e6
+        us, cpu = (time.perf_counter() - t0) / self.n * 1e6, (time.process_time() - c0) / self.n * 1e6
         self.last["stiction"] = (sim, traj)
-        return us
+        return us, cpu
 
     def stiction_steps(self) -> float:
         sim = Simulator(self.scene)
@@ -100,18 +100,18 @@ class Case:
         return float(np.median(times)) / 1e3
 
     # ---- MuJoCo
-    def mujoco_rollout(self, impratio: float) -> float:
+    def mujoco_rollout(self, impratio: float) -> tuple[float, float]:
         import mujoco
         import mujoco.rollout
 
         twin, data = self.twins[impratio], self.datas[impratio]
         mujoco.mj_resetData(twin.model, data)
         control = twin.ctrl.reshape(1, 1, -1) if twin.model.nu else None
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         states, _ = mujoco.rollout.rollout(twin.model, data, self.state0[impratio], control, nstep=self.n)
-        us = (time.perf_counter() - t0) / self.n * 1e6
+        us, cpu = (time.perf_counter() - t0) / self.n * 1e6, (time.process_time() - c0) / self.n * 1e6
         self.last[("mujoco", impratio)] = states[0, :, 1:1 + twin.model.nq]  # FULLPHYSICS: time, qpos, ...
-        return us
+        return us, cpu
 
     def mujoco_steps(self, impratio: float) -> float:
         import mujoco
@@ -185,16 +185,22 @@ def run(scenes: list[str], repeats: int, duration: float, impratios: tuple[float
         for fn in fns.values():
             fn()
     times = {s: {k: [] for k in fns} for s, fns in timers.items()}
+    for s, fns in timers.items():
+        times[s].update({f"{k} cpu": [] for k in fns if k.endswith("rollout")})
     for rep in range(repeats):
         k = rep % len(cases)
         for c in cases[k:] + cases[:k]:
             # each kind (rollout, steps) back to back in both simulators, order swapped every repetition
             for kind in ("rollout", "steps"):
-                names = [n for n in timers[c.name] if n.endswith(kind)]
+                names = [n for n in timers[c.name] if n.endswith(kind)]  # stiction first, then MuJoCo
                 if rep % 2:
                     names.reverse()
                 for n in names:
-                    times[c.name][n].append(timers[c.name][n]())
+                    value = timers[c.name][n]()
+                    if isinstance(value, tuple):  # a rollout: wall and CPU time
+                        value, cpu = value
+                        times[c.name][f"{n} cpu"].append(cpu)
+                    times[c.name][n].append(value)
         print(f"repetition {rep + 1}/{repeats}: " + ", ".join(
             f"{c.name} {times[c.name]['stiction rollout'][-1] / times[c.name][f'mujoco {impratios[0]:g} rollout'][-1]:.2f}"
             for c in cases), file=sys.stderr, flush=True)
@@ -204,9 +210,11 @@ def run(scenes: list[str], repeats: int, duration: float, impratios: tuple[float
         row = {"scene": c.name, "nv": int(c.scene.model.nv), "contacts": len(c.scene.contacts), "steps": c.n,
                "us": {n: spread(v) for n, v in t.items()}, "ratio": {}, "accuracy": c.accuracy()}
         for r in impratios:
-            for kind in ("rollout", "steps"):
+            for kind in ("rollout", "rollout cpu", "steps"):
                 paired = [a / b for a, b in zip(t[f"stiction {kind}"], t[f"mujoco {r:g} {kind}"])]
                 row["ratio"][f"{kind} vs impratio {r:g}"] = spread(paired)
+                # the fastest run of each: the least disturbed by the machine's other work
+                row["ratio"][f"{kind} vs impratio {r:g}, fastest"] = min(t[f"stiction {kind}"]) / min(t[f"mujoco {r:g} {kind}"])
         rows.append(row)
     return {
         "command": " ".join([Path(sys.argv[0]).name] + sys.argv[1:]),
@@ -230,32 +238,48 @@ def markdown(res: dict) -> str:
         f"{res['duration']:g} s per scene, {res['repeats']} alternating repetitions, single thread, medians "
         "(min–max over repetitions).",
         "",
-        f"## Time per step (µs), MuJoCo impratio {r0:g}",
+        f"## stiction / MuJoCo per step (MuJoCo impratio {r0:g}): median over repetitions of the paired ratio (min–max)",
         "",
-        "| scene | nv | contacts | stiction rollout | MuJoCo rollout | **ratio** (paired) | stiction step | MuJoCo step "
-        "| ratio (paired) | stiction C++ step timer |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| scene | nv | contacts | **rollout, CPU time** | rollout, wall time | one step from Python | "
+        "fastest rollouts (wall) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
     ]
 
     def cell(s: dict, spec: str = ".1f") -> str:
         return f"{s['median']:{spec}} ({s['min']:{spec}}–{s['max']:{spec}})"
 
     for row in res["rows"]:
-        us, ratio = row["us"], row["ratio"]
+        ratio = row["ratio"]
+        lines.append(f"| {row['scene']} | {row['nv']} | {row['contacts']} | "
+                     f"**{cell(ratio[f'rollout cpu vs impratio {r0:g}'], '.2f')}** | "
+                     f"{cell(ratio[f'rollout vs impratio {r0:g}'], '.2f')} | {cell(ratio[f'steps vs impratio {r0:g}'], '.2f')} | "
+                     f"{ratio[f'rollout vs impratio {r0:g}, fastest']:.2f} |")
+    lines += [
+        "",
+        "## Time per step (µs): median over repetitions (min–max)",
+        "",
+        "| scene | stiction rollout CPU | MuJoCo rollout CPU | stiction rollout wall | MuJoCo rollout wall "
+        "| stiction step | MuJoCo step | stiction C++ step timer |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for row in res["rows"]:
+        us = row["us"]
         cpp = row["accuracy"]["stiction"]["phases_us"]["total"]
-        lines.append(f"| {row['scene']} | {row['nv']} | {row['contacts']} | {cell(us['stiction rollout'])} | "
-                     f"{cell(us[f'mujoco {r0:g} rollout'])} | **{cell(ratio[f'rollout vs impratio {r0:g}'], '.2f')}** | "
-                     f"{cell(us['stiction steps'])} | {cell(us[f'mujoco {r0:g} steps'])} | "
-                     f"{cell(ratio[f'steps vs impratio {r0:g}'], '.2f')} | {cpp:.1f} |")
+        lines.append(f"| {row['scene']} | {cell(us['stiction rollout cpu'])} | {cell(us[f'mujoco {r0:g} rollout cpu'])} | "
+                     f"{cell(us['stiction rollout'])} | {cell(us[f'mujoco {r0:g} rollout'])} | "
+                     f"{cell(us['stiction steps'])} | {cell(us[f'mujoco {r0:g} steps'])} | {cpp:.1f} |")
     for r in res["impratios"][1:]:
-        lines += ["", f"MuJoCo impratio {r:g}: ratio rollout / step: " + "; ".join(
-            f"{row['scene']} {row['ratio'][f'rollout vs impratio {r:g}']['median']:.2f} / "
+        lines += ["", f"MuJoCo impratio {r:g}: ratio rollout CPU / step: " + "; ".join(
+            f"{row['scene']} {row['ratio'][f'rollout cpu vs impratio {r:g}']['median']:.2f} / "
             f"{row['ratio'][f'steps vs impratio {r:g}']['median']:.2f}" for row in res["rows"])]
     lines += [
         "",
-        "rollout: the C++ loop end to end, wall / steps (stiction records q, v, λ, gaps, residuals and timings; "
-        "MuJoCo its full physics state). step: each step called from Python and timed alone, median over the "
-        "steps. ratio: stiction / MuJoCo per repetition (the two ran back to back), median and range.",
+        "rollout: the C++ loop end to end / steps (stiction records q, v, λ, gaps, residuals and timings; MuJoCo "
+        "its full physics state), as the process's CPU time (time.process_time: not counting the time other "
+        "processes held the core; both loops run in this one thread) and as wall time. one step: each step "
+        "called from Python and timed alone (wall), median over the steps. Ratios are paired: stiction / MuJoCo "
+        "within a repetition (the two ran back to back). fastest rollouts: stiction's fastest repetition over "
+        "MuJoCo's. stiction C++ step timer: the median of its own per-step timer over the last rollout.",
         "",
         "## stiction's phases (median µs per step over the last rollout)",
         "",

@@ -167,10 +167,12 @@ def test_bench_script_runs_and_reports_every_scene_asked(capsys):
     res = bench.run(["ur5-push-wall", "solo12-stand"], repeats=1, duration=0.6, impratios=(1.0,))
     assert [r["scene"] for r in res["rows"]] == ["ur5-push-wall", "solo12-stand"]
     for row in res["rows"]:
-        for key in ("stiction rollout", "mujoco 1 rollout", "stiction steps", "mujoco 1 steps"):
+        for key in ("stiction rollout", "mujoco 1 rollout", "stiction rollout cpu", "mujoco 1 rollout cpu",
+                    "stiction steps", "mujoco 1 steps"):
             assert row["us"][key]["median"] > 0
-        ratio = row["ratio"]["rollout vs impratio 1"]["median"]
-        assert ratio == pytest.approx(row["us"]["stiction rollout"]["median"] / row["us"]["mujoco 1 rollout"]["median"])
+        for kind in ("rollout", "rollout cpu", "steps"):  # one repetition: the ratio of the two runs
+            ratio = row["ratio"][f"{kind} vs impratio 1"]["median"]
+            assert ratio == pytest.approx(row["us"][f"stiction {kind}"]["median"] / row["us"][f"mujoco 1 {kind}"]["median"])
         acc = row["accuracy"]
         assert acc["stiction"]["converged"]
         assert acc["stiction"]["penetration"] < 1e-6 < acc["mujoco impratio 1"]["penetration"]
