@@ -3,7 +3,7 @@
 Each map sweeps two parameters of one scene family and runs every method at every point; a cell's
 colour is the *first* failure mode that our own measures find, in this order (FAILURE_MODES):
 
-1. ``non-finite``: NaN/inf, or the simulator stopped the run as a blow-up;
+1. ``non-finite`` (X): NaN/inf, or the simulator stopped the run as a blow-up;
 2. ``time-limit``: the case did not finish within TIME_LIMIT seconds of wall time;
 3. ``own-solver-failed``: the formulation missed its own stopping test on some step (or refused
    the problem);
@@ -469,7 +469,7 @@ def summarize(rows: list[dict]) -> dict:
 COLORS = {None: "#b8e0b0", "non-finite": "#000000", "time-limit": "#7f7f7f", "own-solver-failed": "#9467bd",
           "residual": "#d62728", "penetration": "#8c564b", "energy-gain": "#ff7f0e",
           "stiction-violated": "#1f77b4", "sliding-wrong": "#e377c2", "structure-lost": "#bcbd22"}
-SHORT = {"non-finite": "NF", "time-limit": "T", "own-solver-failed": "O", "residual": "R", "penetration": "P",
+SHORT = {"non-finite": "X", "time-limit": "T", "own-solver-failed": "O", "residual": "R", "penetration": "P",
          "energy-gain": "E", "stiction-violated": "S", "sliding-wrong": "W", "structure-lost": "L"}
 
 
@@ -510,6 +510,7 @@ def plot(rows: list[dict], out_dir: Path, stamp: dict) -> list[Path]:
     import matplotlib.pyplot as plt
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
+    from matplotlib.ticker import FixedFormatter, FixedLocator, NullLocator
 
     from .sweep import stamp_figure
 
@@ -543,7 +544,7 @@ def plot(rows: list[dict], out_dir: Path, stamp: dict) -> list[Path]:
                 shown = [f for f in fails[id(r)] if f not in everywhere] or fails[id(r)]
                 first = shown[0] if shown else None
                 grid[i, j] = order.index(first)
-                codes = " ".join(SHORT[f] for f in fails[id(r)])
+                codes = "".join(SHORT[f] for f in fails[id(r)])
                 ax.text(np.sqrt(xe[j] * xe[j + 1]) if xlog else (xe[j] + xe[j + 1]) / 2,
                         np.sqrt(ye[i] * ye[i + 1]) if ylog else (ye[i] + ye[i + 1]) / 2,
                         codes, ha="center", va="center", fontsize=6,
@@ -557,10 +558,18 @@ def plot(rows: list[dict], out_dir: Path, stamp: dict) -> list[Path]:
                 ax.set_yscale("log")
             ax.set_xlim(xe[0], xe[-1])
             ax.set_ylim(ye[0], ye[-1])
+            # ticks at the grid's values (log axes of powers of 2 or 3 would otherwise be unlabelled)
+            ax.xaxis.set_major_locator(FixedLocator(xs))
+            ax.xaxis.set_minor_locator(NullLocator())
+            ax.xaxis.set_major_formatter(FixedFormatter([f"{v:g}" for v in xs]))
+            ax.yaxis.set_major_locator(FixedLocator(ys))
+            ax.yaxis.set_minor_locator(NullLocator())
+            ax.yaxis.set_major_formatter(FixedFormatter([f"{v:g}" for v in ys]))
             ax.set_title(method + (f"  (every cell: {', '.join(everywhere)})" if everywhere else ""), fontsize=8)
             ax.set_xlabel(xlabel, fontsize=7)
             ax.set_ylabel(ylabel, fontsize=7)
             ax.tick_params(labelsize=6)
+            ax.tick_params(axis="x", labelrotation=45 if len(xs) > 5 else 0)
             if ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=6, loc="upper left")
         for k in range(len(methods), nrow * ncol):
