@@ -147,3 +147,19 @@ def test_quick_sweep_through_the_cli_writes_csv_png_and_finite_rows(tmp_path, ca
     assert res["maps"]["incline"]["exact"]["failed"] == 0
     assert main(argv) in (0, None)
     assert json.loads(capsys.readouterr().out)["resumed"] == len(cases)
+
+
+def test_the_ode_line_relaxed_stiction_speed():
+    """The line drawn on the delta x zeta map: below mu g delta / (2 zeta) the relaxed law (eq. 64)
+    holds a_t = -(2 zeta / delta) v_t. At delta = 0.1 s, zeta = 0.1 that speed is 2.45 m/s > v0 = 1:
+    the cube's velocity decays exponentially and it travels v0 delta/(2 zeta) (1 - exp(-2 zeta T / delta))."""
+    from stiction import _core
+    from stiction.simulator import Simulator
+
+    delta, zeta, T = 0.1, 0.1, 0.4
+    assert st.ODE_MU * st.G * delta / (2 * zeta) > st.ODE_V0
+    sim = Simulator("cube-slide", mode="rk4", delta=delta, zeta=zeta,
+                    dt=min(1e-3, 0.5 * _core.rk4_stable_step(delta, zeta)))
+    traj = sim.rollout(T)
+    expected = st.ODE_V0 * delta / (2 * zeta) * (1 - math.exp(-2 * zeta * T / delta))
+    assert traj.q[-1, 0] - traj.q[0, 0] == pytest.approx(expected, rel=1e-3)

@@ -35,8 +35,12 @@ Maps (x × y):
   while h² ω² + 2 h β ω² < 4, i.e. h < −β + sqrt(β² + 4 / (K λ_max(A))) (for β = 0 and one
   spring on a point mass: 2 sqrt(m/K)). The formulation itself is implicit (Kikuuwe–Fujimoto),
   so the line shows where an explicit penalty would stop, not where this one must;
-- ``ode``: δ × ζ for the relaxed ODE (eq. 64, mode rk4) on the sliding cube (cube-slide): dt =
-  min(1 ms, half the largest stable RK4 step), so what fails is the relaxation, not RK4.
+- ``ode``: δ × ζ for the relaxed ODE (eq. 64, mode rk4) on the sliding cube (cube-slide, v0 = 1
+  m/s, μ 0.5): dt = min(1 ms, half the largest stable RK4 step), so what fails is the relaxation,
+  not RK4. The relaxation term −(2ζ/δ) J v of b (eq. 27) acts on the tangential rows too: the
+  relaxed law "sticks" (a_t = −(2ζ/δ) v_t, an exponential decay) while friction can supply it,
+  i.e. below the speed μ g δ / (2ζ). The line drawn is μ g δ / (2ζ) = v0: under it the cube never
+  slides; above it, the deceleration is wrong over the part of the run slower than that speed.
 """
 from __future__ import annotations
 
@@ -101,6 +105,7 @@ AXES = {  # (x name, y name, x log?, y log?)
     "penalty": ("penalty stiffness K (N/m)", "dt (s)", True, True),
     "ode": ("delta (s)", "zeta", True, True),
 }
+ODE_V0, ODE_MU = 1.0, 0.5  # cube-slide's launch speed and friction (checked against the scene in _setup)
 DURATION = {"stack-rest": 2.0, "stack-slide": 0.4, "incline": 2.0, "tower": 1.0, "penalty": 2.0, "ode": 0.4}
 
 
@@ -250,6 +255,8 @@ def _setup(case: dict):
         ov.update(mode="rk4", delta=x, zeta=y, dt=min(1e-3, 0.5 * limit), tolerance=SOLVER_TOLERANCE)
         checks["boundary"] = limit
         v0 = float(scene.v0[0])
+        if (v0, scene.mu) != (ODE_V0, ODE_MU):
+            raise RuntimeError(f"cube-slide changed (v0 {v0}, mu {scene.mu}): update ODE_V0, ODE_MU")
         checks["slide"] = {"bodies": [0], "accel": np.array([-scene.mu * G, 0.0, 0.0]), "v0": v0}
     else:
         raise ValueError(f"unknown map {m!r} (known: {', '.join(MAPS)})")
@@ -495,7 +502,9 @@ def _boundary(ax, m, xs, ys, rows):
         k = np.geomspace(min(xs) / 3, max(xs) * 3, 200)
         ax.plot(k, penalty_explicit_limit(k, lam), "k--", lw=1.2, label="explicit limit")
     elif m == "ode":
-        ax.axhline(1.0, color="k", ls=":", lw=1.0, label="ζ = 1 (critical)")
+        d = np.geomspace(min(xs) / 3, max(xs) * 3, 200)
+        v0 = ODE_V0
+        ax.plot(d, ODE_MU * G * d / (2.0 * v0), "k--", lw=1.2, label="μgδ/(2ζ) = v0")
 
 
 def plot(rows: list[dict], out_dir: Path, stamp: dict) -> list[Path]:
