@@ -163,3 +163,30 @@ def test_the_ode_line_relaxed_stiction_speed():
     traj = sim.rollout(T)
     expected = st.ODE_V0 * delta / (2 * zeta) * (1 - math.exp(-2 * zeta * T / delta))
     assert traj.q[-1, 0] - traj.q[0, 0] == pytest.approx(expected, rel=1e-3)
+
+
+def test_explicit_limit_is_where_symplectic_euler_turns_unstable():
+    """The derivation: x'' + beta w^2 x' + w^2 x = 0 by symplectic Euler grows just above
+    h* = -beta + sqrt(beta^2 + 4/w^2) and does not just below (w^2 = K lambda_max)."""
+    k, lam, beta = 1e5, 14.3, 1e-3
+    w2 = k * lam
+    h_star = float(st.penalty_explicit_limit(k, lam, beta))
+
+    def amplitude(h, steps=4000):
+        x, v = 1.0, 0.0
+        for _ in range(steps):
+            v += h * (-w2 * x - beta * w2 * v)
+            x += h * v
+        return abs(x) + abs(v) / math.sqrt(w2)
+
+    assert amplitude(0.99 * h_star) < 1.0
+    assert amplitude(1.01 * h_star) > 1e3
+
+
+def test_implicit_penalty_survives_far_past_the_explicit_limit():
+    """Kikuuwe-Fujimoto's implicit penalty (eq. 83-84) at K = 1e7, dt = 10 ms, ~700x the explicit
+    limit: no blow-up (what fails there is its own iteration, not stability)."""
+    r = run("penalty", "penalty", 1e7, 1e-2)
+    assert r["y"] > 100 * r["boundary"]
+    assert "non-finite" not in r["failures"] and r["steps"] == 200
+    assert r["penetration"] < 1e-5
