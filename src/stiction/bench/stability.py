@@ -41,6 +41,15 @@ Maps (x × y):
   relaxed law "sticks" (a_t = −(2ζ/δ) v_t, an exponential decay) while friction can supply it,
   i.e. below the speed μ g δ / (2ζ). The line drawn is μ g δ / (2ζ) = v0: under it the cube never
   slides; above it, the deceleration is wrong over the part of the run slower than that speed.
+
+Rows (FIELDS, the CSV's columns): ``map, method, x, y, failure`` (the issue's schema: failure None
+or the first mode's name), then ``failures`` (every mode, "|"-separated), ``x_name, y_name, scene,
+dt, tolerance, steps``, the measures ``residual`` (largest exact-law residual of a step),
+``penetration`` (m), ``energy_gain`` (relative), ``drift`` and ``drift_limit`` (m, where the exact
+law sticks), ``accel_error`` (relative) and ``direction_error_deg`` (where it slides), ``tilt_deg``,
+``unconverged_steps`` (the formulation's own test missed), ``boundary`` (incline: tan θ, to compare
+with μ; penalty: the explicit dt limit at that K; ode: the largest dt the simulator accepts for RK4, _core.rk4_stable_step), ``seconds`` (wall
+time of the case) and ``error`` (why a run stopped).
 """
 from __future__ import annotations
 
