@@ -48,8 +48,8 @@ dt, tolerance, steps``, the measures ``residual`` (largest exact-law residual of
 ``penetration`` (m), ``energy_gain`` (relative), ``drift`` and ``drift_limit`` (m, where the exact
 law sticks), ``accel_error`` (relative) and ``direction_error_deg`` (where it slides), ``tilt_deg``,
 ``unconverged_steps`` (the formulation's own test missed), ``boundary`` (incline: tan θ, to compare
-with μ; penalty: the explicit dt limit at that K; ode: the largest dt the simulator accepts for RK4, _core.rk4_stable_step), ``seconds`` (wall
-time of the case) and ``error`` (why a run stopped).
+with μ; penalty: the explicit dt limit at that K; ode: the largest dt the simulator accepts for RK4,
+``_core.rk4_stable_step``), ``seconds`` (wall time of the case) and ``error`` (why a run stopped).
 """
 from __future__ import annotations
 
@@ -61,7 +61,8 @@ from pathlib import Path
 import numpy as np
 
 NAME = "stability"
-HELP = "stability maps: where each method fails (mass ratio x dt, mu x slope, contacts x tolerance, K x dt, delta x zeta)"
+HELP = ("stability maps: where each method fails (mass ratio x dt, mu x slope, contacts x tolerance, K x dt, "
+        "delta x zeta)")
 FIELDS = ("map", "method", "x", "y", "failure", "failures", "x_name", "y_name", "scene", "dt", "tolerance",
           "steps", "residual", "penetration", "energy_gain", "drift", "drift_limit", "accel_error",
           "direction_error_deg", "tilt_deg", "unconverged_steps", "boundary", "seconds", "error")
