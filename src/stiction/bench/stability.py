@@ -57,6 +57,7 @@ import dataclasses
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -226,10 +227,10 @@ def _setup(case: dict):
     from ..scene import load_scene
 
     m, method, x, y = case["map"], case["method"], case["x"], case["y"]
-    ov = {"duration": DURATION[m]}
+    ov: dict[str, Any] = {"duration": DURATION[m]}
     if method not in ("exact-rk4",):
         ov["formulation"] = method
-    checks = {"stick": [], "stick_relative": None, "slide": None, "stacked": False, "boundary": None}
+    checks: dict[str, Any] = {"stick": [], "stick_relative": None, "slide": None, "stacked": False, "boundary": None}
     if m in ("stack-rest", "stack-slide"):
         scene = stack_scene(x, m == "stack-slide")
         ov.update(dt=y, tolerance=SOLVER_TOLERANCE)
@@ -314,7 +315,7 @@ def measures(scene, traj, checks: dict, duration: float) -> dict:
         vel.append(np.einsum("nij,nj->ni", R, v_com_local))  # world-frame velocity of the centre of mass
         rot.append(R)
     e0 = energy[0]
-    out = {"energy_gain": float((energy.max() - e0) / abs(e0)) if e0 != 0 else float(energy.max() - e0)}
+    out: dict[str, Any] = {"energy_gain": float((energy.max() - e0) / abs(e0)) if e0 != 0 else float(energy.max() - e0)}
     # tilt: the largest rotation of any body away from its initial orientation
     tilt = 0.0
     for R in rot:
@@ -341,7 +342,8 @@ def measures(scene, traj, checks: dict, duration: float) -> dict:
     out["drift"] = drift
     out["drift_limit"] = DRIFT_RATE_LIMIT * duration if drift is not None else None
     # sliding: acceleration (least squares over the sliding interval) and direction of the motion
-    accel_err = direction = None
+    accel_err: float | None = None
+    direction: float | None = None
     s = checks["slide"]
     if s is not None:
         a_exp = s["accel"]
@@ -364,11 +366,11 @@ def measures(scene, traj, checks: dict, duration: float) -> dict:
             errs.append(float(np.linalg.norm(a_meas - a_exp) / np.linalg.norm(a_exp)))
             motion = pos[b][-1] - pos[b][0]
             along = np.sign(a_exp[0]) if s["v0"] == 0 else -np.sign(a_exp[0])  # the direction it should move
-            d = np.array([along, 0.0, 0.0])
+            dvec = np.array([along, 0.0, 0.0])
             horiz = motion.copy()
             horiz[2] = 0.0
             nrm = np.linalg.norm(horiz)
-            dirs.append(float(np.degrees(np.arccos(np.clip(horiz @ d / nrm, -1, 1)))) if nrm > 0 else 180.0)
+            dirs.append(float(np.degrees(np.arccos(np.clip(horiz @ dvec / nrm, -1, 1)))) if nrm > 0 else 180.0)
         accel_err, direction = max(errs), max(dirs)
     out["accel_error"], out["direction_error_deg"] = accel_err, direction
     return out
@@ -410,7 +412,8 @@ def evaluate(case: dict) -> dict:
     m = case["map"]
     scene, ov, checks = _setup(case)
     x_name, y_name = AXES[m][:2]
-    row = {"map": m, "method": case["method"], "x": case["x"], "y": case["y"], "failure": None, "failures": "",
+    row: dict[str, Any] = {
+           "map": m, "method": case["method"], "x": case["x"], "y": case["y"], "failure": None, "failures": "",
            "x_name": x_name, "y_name": y_name, "scene": scene.name, "dt": ov.get("dt"),
            "tolerance": ov.get("tolerance"), "steps": 0, "residual": None, "penetration": None,
            "energy_gain": None, "drift": None, "drift_limit": None, "accel_error": None,
@@ -441,7 +444,7 @@ def evaluate(case: dict) -> dict:
                 break
     if trajs:
         t0 = trajs[0]
-        cat = {k: np.concatenate([getattr(t0, k)] + [getattr(t, k)[1:] for t in trajs[1:]])
+        cat: dict[str, Any] = {k: np.concatenate([getattr(t0, k)] + [getattr(t, k)[1:] for t in trajs[1:]])
                for k in ("t", "q", "v", "gaps", "residual", "converged")}
         traj = dataclasses.replace(t0, **{k: cat[k] for k in cat})
         row["steps"] = int(len(traj.t) - 1)
