@@ -133,3 +133,13 @@ def test_bad_options_are_loud(problem_dir):
                        (["--tols", "1e-4,-1"], "tols"), (["--time-limit", "0"], "time-limit")):
         with pytest.raises(ValueError, match=match):
             profiles.cases(_args(problem_dir, *bad))
+
+
+def test_a_cache_from_another_recipe_is_rebuilt(tmp_path, monkeypatch):
+    first = profiles.robot_problem_set(tmp_path, quick=True)
+    monkeypatch.setattr(profiles, "QUICK_ROBOT_SCENES", ("cube-incline-slip",))
+    second = profiles.robot_problem_set(tmp_path, quick=True)
+    assert {r["scene"] for r in second if r["category"] != "impacts"} == {"cube-incline-slip"}
+    assert len(second) < len(first)
+    folder = next(tmp_path.iterdir())
+    assert sorted(p.name for p in folder.glob("*.hdf5")) == sorted(r["file"] for r in second)

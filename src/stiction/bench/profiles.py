@@ -122,10 +122,11 @@ def robot_problem_set(directory: str | os.PathLike | None = None, quick: bool = 
     """Problems dumped from the package's own simulations (``stiction dump``): robots standing, sliding
     down a slope, objects landing (impacts), an arm pushing (grasps), stacked boxes (A couples the
     contacts through the bodies between them). Built once and cached in
-    ``directory/robot-v<version>-seed<seed>[-quick]`` (a manifest.json lists them; delete the folder
-    to rebuild). Steps are drawn by a seeded generator after the first `first` steps (standing,
-    slipping, grasps); impacts are the first steps with contact force of a ball landing on a table
-    and of seeded cube drops. Returns one record per problem: name, category, path, contacts."""
+    ``directory/robot-v<version>-seed<seed>[-quick]`` (a manifest.json lists them and the recipe; a
+    folder built from another recipe is rebuilt). Steps are drawn by a seeded generator after each
+    scene's first steps (standing, slipping, grasps, stacks); impacts are the first steps with contact
+    force of a ball landing on a table and of seeded cube drops. Returns one record per problem:
+    name, category, path, scene, step, contacts."""
     from ..dump import dump
 
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -133,10 +134,19 @@ def robot_problem_set(directory: str | os.PathLike | None = None, quick: bool = 
     root = Path(directory) if directory is not None else default_problem_dir()
     folder = root / f"robot-v{ROBOT_SET_VERSION}-seed{seed}{'-quick' if quick else ''}"
     manifest = folder / "manifest.json"
+    # what the set is made of: a cache built from another recipe is rebuilt
+    recipe = {"scenes": [list(x) for x in ROBOT_SCENES if not quick or x[1] in QUICK_ROBOT_SCENES],
+              "cube_drops": QUICK_CUBE_DROPS if quick else CUBE_DROPS, "impact_steps": IMPACT_STEPS}
     if manifest.is_file():
-        recs = json.loads(manifest.read_text())["problems"]
-        if all((folder / r["file"]).is_file() for r in recs):
+        try:
+            old = json.loads(manifest.read_text())
+        except ValueError:
+            old = {}
+        recs = old.get("problems", [])
+        if old.get("recipe") == recipe and recs and all((folder / r["file"]).is_file() for r in recs):
             return [{**r, "path": str(folder / r["file"])} for r in recs]
+        for f in folder.glob("*.hdf5"):  # stale: rebuild from scratch
+            f.unlink()
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     recs = []
@@ -164,7 +174,7 @@ def robot_problem_set(directory: str | os.PathLike | None = None, quick: bool = 
         if hits:
             add("impacts", dump(make(), max(hits), folder, only=hits, prefix=f"impacts--{name}"))
     manifest.write_text(json.dumps({"version": ROBOT_SET_VERSION, "seed": seed, "quick": quick,
-                                    "problems": recs}, indent=1))
+                                    "recipe": recipe, "problems": recs}, indent=1))
     return [{**r, "path": str(folder / r["file"])} for r in recs]
 
 
@@ -568,11 +578,12 @@ def plot(rows: list[dict], out_dir, stamp: dict) -> list[Path]:
         for i, tol in enumerate(tols):
             g = by_tol[tol]
             names = list(g["solvers"])
-            colours = {n: plt.cm.tab10(k % 10) for k, n in enumerate(names)}
+            palette = [plt.cm.tab10(k) for k in range(10)] + [plt.cm.Dark2(k) for k in range(8)]
+            colours = {n: palette[k % len(palette)] for k, n in enumerate(names)}
             ax_p, ax_d, ax_b = axes[i]
             for n in names:
                 d = g["solvers"][n]
-                style = "-" if d["ours"] else "--"
+                style = "-" if d["ours"] else (":" if n.startswith("siconos") else "--")
                 ax_p.step(g["tau"], d["rho"], where="post", ls=style, color=colours[n],
                           label=f"{n} ({d['solved']}/{d['problems']})")
                 ax_d.step(g["budget_seconds"], d["data_profile"], where="post", ls=style, color=colours[n],
@@ -597,7 +608,7 @@ def plot(rows: list[dict], out_dir, stamp: dict) -> list[Path]:
                      title=f"{set_name}: success and false convergence, tol {tol}")
             for ax in (ax_p, ax_d, ax_b):
                 ax.grid(alpha=0.3)
-                ax.legend(fontsize=7, loc="lower right" if ax is not ax_b else "upper center",
+                ax.legend(fontsize=7 if ax is ax_b else 6.5, loc="best" if ax is not ax_b else "upper center",
                           ncol=1 if ax is not ax_b else 2)
         fig.suptitle(f"Solvers alone on the {set_name} problem set ({g['solvers'][names[0]]['problems']} "
                      "problems); solved = exact-law relative residual ≤ tol, whatever the solver claims; "
