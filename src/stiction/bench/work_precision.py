@@ -16,7 +16,7 @@ and method, sweeping the time step dt and the solver tolerance (``stiction bench
   F = 1.5 mu m g at 30 deg (body frame; stiction.casestudies.diagonal_push): the exact cone
   slides it along the push at a = 0.5 mu g. error = max(|p_xy(T) - p0 - s(T) e_phi|, max_t |z - z0|).
 - ``solo12-stand``: no closed form for the settling robot: a converged reference (exact law, default
-  solver, dt = 5e-5 s, tolerance 1e-11). error = max(|base height(T) - reference|, largest
+  solver, dt = 1e-5 s, tolerance 1e-11). error = max(|base height(T) - reference|, largest
   horizontal distance of a foot-sphere centre at T from the reference's).
 
 **Methods**: the formulations (exact, ccp, nakaoka, pyramid = 4 facets circumscribed, penalty
@@ -87,7 +87,7 @@ QUICK_SCENES = ("cube-incline-stick", "cube-slide")
 QUICK_METHODS = ("exact", "ccp", "pyramid", "penalty", "mujoco-default")
 TIME_LIMIT, QUICK_TIME_LIMIT = 60.0, 10.0  # wall seconds per case
 LAW_TOLERANCE = 1e-2
-REFERENCE_DT, REFERENCE_TOL = 5e-5, 1e-11
+REFERENCE_DT, REFERENCE_TOL = 1e-5, 1e-11
 
 
 @dataclasses.dataclass(frozen=True)
