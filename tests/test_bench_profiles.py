@@ -86,6 +86,9 @@ def test_robot_problem_set_is_seeded_cached_and_large(tmp_path, problem_dir):
     assert {r["category"] for r in quick} == cats
     with pytest.raises(ValueError, match="seed"):
         profiles.robot_problem_set(tmp_path, seed=-1)
+    (tmp_path / "f").write_text("")
+    with pytest.raises(ValueError, match="not a folder"):
+        profiles.robot_problem_set(tmp_path / "f")
 
 
 def _args(problem_dir, *extra):

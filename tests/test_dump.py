@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import stiction
-from stiction import cli, dump, fclib
+from stiction import cli, dump, fclib, resources
 from stiction.simulator import Simulator
 
 
@@ -62,6 +62,22 @@ def test_dumped_problem_carries_the_weight_in_impulses(tmp_path):
         assert normal == pytest.approx(1.0 * 9.81 * math.cos(math.radians(30)) * 1e-3, rel=2e-3)
 
 
+def test_ode_mode_problem_is_the_last_stage_unscaled(tmp_path):
+    """In the ODE modes (eq. 64) each RK stage solves A lambda - b at scale 1: the file holds the last
+    stage's problem, and the forces the simulator found solve it."""
+    recs = dump.dump("cube-incline-slip", 10, tmp_path, every=5, mode="rk4")
+    ref = Simulator("cube-incline-slip", mode="rk4")
+    for k in range(1, 11):
+        ref.step()
+        if k % 5 == 0:
+            A, b, lam = _solver_problem(ref)
+            P = fclib.load(recs[k // 5 - 1]["path"])
+            assert np.abs(P.A - A).max() <= 1e-12 * np.abs(A).max()
+            assert np.abs(P.b - b).max() <= 1e-12 * np.abs(b).max()
+            # force level, not impulses: the normal forces carry m g cos(30) itself
+            assert lam[2::3].sum() == pytest.approx(9.81 * math.cos(math.radians(30)), rel=2e-3)
+
+
 def test_no_file_while_nothing_touches(tmp_path):
     """The ball of ball-on-table falls 10 cm (0.14 s): no contact problem in its first 100 steps,
     and files from its landing on."""
@@ -90,6 +106,14 @@ def test_stiction_dump_command(tmp_path, capsys):
     assert fclib.load(tmp_path / "cube-incline-slip-step000004.hdf5").contacts == 4
     assert cli.main(["dump", "cube-slide", "--steps", "0", "--out", str(tmp_path)]) == 2
     assert "steps" in capsys.readouterr().err
+    # a scene file of one's own
+    toml = tmp_path / "my-slope.toml"
+    toml.write_text((resources.scenes_dir() / "cube-incline-slip.toml").read_text().replace(
+        'name = "cube-incline-slip"', 'name = "my-slope"'))
+    assert cli.main(["dump", str(toml), "--steps", "3", "--every", "3", "--out", str(tmp_path / "own")]) == 0
+    assert fclib.load(tmp_path / "own" / "my-slope-step000003.hdf5").contacts == 4
+    assert cli.main(["dump", "cube-slide", "--steps", "2", "--out", str(toml)]) == 2
+    assert "is a file" in capsys.readouterr().err
 
 
 def test_bad_input_is_loud(tmp_path):

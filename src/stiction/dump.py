@@ -80,6 +80,8 @@ def dump(scene, steps: int, out_dir: str | os.PathLike, every: int = 1, solver: 
     if wanted is not None and any(k < 1 or k > steps for k in wanted):
         raise ValueError(f"dump: steps in `only` must lie in [1, {steps}], got {sorted(wanted)}")
     out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"dump: --out {out} is a file, not a folder")
     out.mkdir(parents=True, exist_ok=True)
     prefix = prefix or sim.scene.name
     s = sim.model.settings

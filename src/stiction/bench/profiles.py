@@ -132,6 +132,8 @@ def robot_problem_set(directory: str | os.PathLike | None = None, quick: bool = 
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"robot_problem_set: seed must be an integer >= 0, got {seed!r}")
     root = Path(directory) if directory is not None else default_problem_dir()
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"--problems {root} is a file, not a folder")
     folder = root / f"robot-v{ROBOT_SET_VERSION}-seed{seed}{'-quick' if quick else ''}"
     manifest = folder / "manifest.json"
     # what the set is made of: a cache built from another recipe is rebuilt
