@@ -48,6 +48,8 @@ def test_performance_ratios_and_profiles_by_hand():
     assert (a["solved"], b["solved"], c["solved"]) == (2, 2, 2)
     assert (a["false_claims"], b["false_claims"], c["false_claims"]) == (1, 1, 0)  # p2 by a, p4 by b
     assert a["false_convergence_rate"] == 0.25 and c["within_10x_tol"] == 1.0
+    assert a["by_category"] == {"p1": "1/1", "p2": "0/1", "p3": "1/1", "p4": "0/1"}
+    assert c["by_category"]["p3"] == "0/1"  # over the time limit
     # shifted geometric mean: failures at the 1 s limit
     sgm = math.exp(np.mean(np.log(np.array([1e-3, 1.0, 1e-3, 1.0]) + profiles.SGM_SHIFT))) - profiles.SGM_SHIFT
     assert a["sgm_seconds"] == pytest.approx(sgm, rel=1e-12)
@@ -122,6 +124,7 @@ def test_quick_bench_end_to_end(tmp_path, problem_dir, capsys):
         header = next(csv.reader(fh))
     assert tuple(header) == profiles.FIELDS
     assert (out / "profiles-fclib.png").stat().st_size > 10_000 and (out / "profiles-robot.png").is_file()
+    assert (out / "profiles-robot-families.png").is_file()
     # the same through the CLI: resumed from the CSV (nothing re-run), the JSON on stdout
     code = cli.main(["bench", "profiles", "--quick", "--json", "--problems", str(problem_dir),
                      "--out", str(out)])

@@ -514,6 +514,13 @@ def _budget_grid(rows: list[dict]) -> list[float]:
     return [float(x) for x in np.geomspace(1e-6, limit, 61)]
 
 
+def _categories(problems: list[str]) -> dict:
+    out: dict = {}
+    for p in problems:
+        out.setdefault(p.split("--")[0], []).append(p)
+    return out
+
+
 def _group_summary(rows: list[dict]) -> dict:
     ratios = performance_ratios(rows)
     t = effective_times(rows)
@@ -539,6 +546,9 @@ def _group_summary(rows: list[dict]) -> dict:
             "within_10x_tol": sum(r["residual"] is not None and r["residual"] <= 10 * r["tol"] for r in mine)
             / len(problems),
             "sgm_seconds": shifted_geometric_mean(times),
+            # where it fails: solved / problems per family (the name's prefix before "--")
+            "by_category": {c: f"{sum(math.isfinite(t.get((p, s), math.inf)) for p in ps)}/{len(ps)}"
+                            for c, ps in _categories(problems).items()},
             "rho": [rho(ratios[s], x) for x in taus],
             "data_profile": [sum(x <= b for x in solved_times) / len(problems) for b in budgets],
         }
@@ -554,7 +564,8 @@ def summarize(rows: list[dict]) -> dict:
         for tol in sorted({r["tol"] for r in rows if r["set"] == s}, reverse=True):
             group = [r for r in rows if r["set"] == s and r["tol"] == tol]
             out.setdefault(s, {})[f"{tol:g}"] = _group_summary(group)
-    table = [{"set": s, "tol": tol, "solver": name, **{k: v for k, v in d.items() if k not in ("rho", "data_profile")}}
+    table = [{"set": s, "tol": tol, "solver": name,
+              **{k: v for k, v in d.items() if k not in ("rho", "data_profile", "by_category")}}
              for s, by_tol in out.items() for tol, g in by_tol.items() for name, d in g["solvers"].items()]
     return {"profiles": out, "table": table}
 
@@ -621,4 +632,34 @@ def plot(rows: list[dict], out_dir, stamp: dict) -> list[Path]:
         fig.savefig(path, dpi=110)
         plt.close(fig)
         paths.append(path)
+        paths.append(_plot_categories(plt, set_name, by_tol, Path(out_dir), stamp))
     return paths
+
+
+def _plot_categories(plt, set_name: str, by_tol: dict, out_dir: Path, stamp: dict) -> Path:
+    """Where each solver fails: the fraction solved per problem family, one heat map per tolerance."""
+    from .sweep import stamp_figure
+
+    tols = list(by_tol)
+    first = by_tol[tols[0]]["solvers"]
+    names = list(first)
+    cats = list(next(iter(first.values()))["by_category"])
+    fig, axes = plt.subplots(len(tols), 1, figsize=(max(6.0, 0.8 * len(cats) + 2.5),
+                                                    (0.3 * len(names) + 1.6) * len(tols)), squeeze=False)
+    for ax, tol in zip(axes[:, 0], tols):
+        g = by_tol[tol]["solvers"]
+        cells = [[g[n]["by_category"][c] for c in cats] for n in names]
+        frac = np.array([[int(x.split("/")[0]) / int(x.split("/")[1]) for x in row] for row in cells])
+        ax.imshow(frac, cmap="RdYlGn", vmin=-0.4, vmax=1.4, aspect="auto")  # light ends: the text stays legible
+        for i, row in enumerate(cells):
+            for j, text in enumerate(row):
+                ax.text(j, i, text, ha="center", va="center", fontsize=7)
+        ax.set_xticks(range(len(cats)), cats, rotation=35, ha="right", fontsize=8)
+        ax.set_yticks(range(len(names)), names, fontsize=8)
+        ax.set_title(f"{set_name}: solved per family (residual ≤ {tol}, in time)", fontsize=9)
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    stamp_figure(fig, stamp)
+    path = out_dir / f"profiles-{set_name}-families.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
