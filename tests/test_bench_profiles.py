@@ -59,6 +59,8 @@ def test_performance_ratios_and_profiles_by_hand():
     for d in (a, b, c):
         assert all(x <= y for x, y in zip(d["data_profile"], d["data_profile"][1:]))
         assert d["data_profile"][-1] == d["success_rate"]
+    text = profiles.report(profiles.summarize(_table())).splitlines()
+    assert text[0].startswith("s, tol 1e-08") and [line.split()[0] for line in text[1:]] == ["a", "c", "b"]  # by solved, then time
     k = next(i for i, t in enumerate(budgets) if t >= 1.5e-3)
     assert a["data_profile"][k] == 0.5 and b["data_profile"][k] == 0.0
 

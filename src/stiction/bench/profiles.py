@@ -570,6 +570,20 @@ def summarize(rows: list[dict]) -> dict:
     return {"profiles": out, "table": table}
 
 
+def report(result: dict) -> str:
+    """The human summary (instead of thousands of rows): per set and tolerance, one line per solver."""
+    lines = []
+    for s, by_tol in result.get("profiles", {}).items():
+        for tol, g in by_tol.items():
+            lines.append(f"{s}, tol {tol}:  solver / solved / false claims / residual <= 10 tol / "
+                         f"shifted geometric mean time (failures at the limit)")
+            for name, d in sorted(g["solvers"].items(), key=lambda kv: (-kv[1]["solved"], kv[1]["sgm_seconds"])):
+                lines.append(f"  {name:22s} {d['solved']:4d}/{d['problems']:<4d} {d['false_claims']:4d}   "
+                             f"{d['within_10x_tol']:6.0%}   {d['sgm_seconds'] * 1e3:10.4g} ms")
+    lines += [f"wrote {f}" for f in result.get("files", [])]
+    return "\n".join(lines)
+
+
 # ---- charts -------------------------------------------------------------------------------------------
 
 def plot(rows: list[dict], out_dir, stamp: dict) -> list[Path]:
