@@ -151,3 +151,21 @@ def test_a_cache_from_another_recipe_is_rebuilt(tmp_path, monkeypatch):
     assert len(second) < len(first)
     folder = next(tmp_path.iterdir())
     assert sorted(p.name for p in folder.glob("*.hdf5")) == sorted(r["file"] for r in second)
+
+
+def test_siconos_only_when_usable(problem_dir, monkeypatch):
+    monkeypatch.setattr(profiles, "siconos_usable", lambda python="/usr/bin/python3": False)
+    solvers = {c["solver"] for c in profiles.cases(_full_args(problem_dir, "--sets", "fclib"))}
+    assert solvers == set(profiles.OURS + profiles.PINOCCHIO)
+    with pytest.raises(ValueError, match="Siconos"):
+        profiles.cases(_full_args(problem_dir, "--sets", "fclib", "--solvers", "default,siconos-nsgs"))
+    monkeypatch.setattr(profiles, "siconos_usable", lambda python="/usr/bin/python3": True)
+    solvers = {c["solver"] for c in profiles.cases(_full_args(problem_dir, "--sets", "fclib"))}
+    assert solvers == set(profiles.ALL_SOLVERS)
+
+
+def _full_args(problem_dir, *extra):
+    parser = argparse.ArgumentParser()
+    sweep.add_common_arguments(parser)
+    profiles.add_arguments(parser)
+    return parser.parse_args(["--problems", str(problem_dir), *extra])
