@@ -178,3 +178,22 @@ def test_bench_script_runs_and_reports_every_scene_asked(capsys):
         assert acc["stiction"]["penetration"] < 1e-6 < acc["mujoco impratio 1"]["penetration"]
         assert acc["mujoco impratio 1"]["rollout_vs_steps"] == 0.0
     assert "| ur5-push-wall | 6 | 1 |" in bench.markdown(res)
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_same_joint_pd_torque(twins, name, rng):
+    """MuJoCo's actuator torque at a random state is stiction's PD law kp (q_target - q) - kd v +
+    tau_ff joint by joint (the UR5's gravity feed-forward included)."""
+    scene, twin = twins[name]
+    model, m = scene.model, twin.model
+    d = mujoco.MjData(m)
+    q, v = _random_configuration(model, rng), rng.standard_normal(model.nv)
+    d.qpos[:], d.qvel[:], d.ctrl[:] = twin.qpos(q), twin.qvel(q, v), twin.ctrl
+    mujoco.mj_forward(m, d)
+    expected = scene.kp * pin.difference(model, q, scene.q_target) - scene.kd * v + scene.tau_ff
+    for j in twin.joints:
+        if j.kind != "free":
+            assert d.qfrc_actuator[j.dofadr] == pytest.approx(expected[j.idx_v], rel=1e-12, abs=1e-12)
+        else:
+            assert not d.qfrc_actuator[j.dofadr:j.dofadr + 6].any()
+    assert np.abs(expected).max() > 1.0
