@@ -658,7 +658,7 @@ def _plot_categories(plt, set_name: str, by_tol: dict, out_dir: Path, stamp: dic
     first = by_tol[tols[0]]["solvers"]
     names = list(first)
     cats = list(next(iter(first.values()))["by_category"])
-    fig, axes = plt.subplots(len(tols), 1, figsize=(max(6.0, 0.8 * len(cats) + 2.5),
+    fig, axes = plt.subplots(len(tols), 1, figsize=(max(10.0, 0.8 * len(cats) + 2.5),  # the stamp fits
                                                     (0.3 * len(names) + 1.6) * len(tols)), squeeze=False)
     for ax, tol in zip(axes[:, 0], tols):
         g = by_tol[tol]["solvers"]
