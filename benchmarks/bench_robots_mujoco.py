@@ -8,7 +8,8 @@ MuJoCo is the optional ``bench`` extra (``mujoco==4.0.*``): without it the scrip
 exits 0.
 
 Scenes (default): solo12-stand, go2-stand, anymal-stand, talos-stand, ur5-push-wall,
-ur5-push-box. The MuJoCo twin of each is built by ``stiction.bench.mujoco_robots.mujoco_twin``
+ur5-push-box, solo12-slope-stick (joints locked, gravity tilted 15°, as stiction models the slope) and
+solo12-on-board (Solo-12 on a free board on the ground: contacts between two bodies). The MuJoCo twin of each is built by ``stiction.bench.mujoco_robots.mujoco_twin``
 from the scene's own Pinocchio model (same masses, inertias, joint frames, contact spheres and
 points on the same links, joint PD, initial state, dt, μ, gravity); MuJoCo: elliptic cones,
 Newton, 100 iterations, tolerance 1e-10, implicitfast, impratio 1 (and any ``--impratio``), its
@@ -59,7 +60,8 @@ from stiction import _core
 from stiction.bench import mujoco_robots
 from stiction.simulator import PHASES, Simulator
 
-SCENES = ("solo12-stand", "go2-stand", "anymal-stand", "talos-stand", "ur5-push-wall", "ur5-push-box")
+SCENES = ("solo12-stand", "go2-stand", "anymal-stand", "talos-stand", "ur5-push-wall", "ur5-push-box",
+          "solo12-slope-stick", "solo12-on-board")
 DURATION = 2.0  # s
 REPEATS, QUICK_REPEATS = 9, 3
 

