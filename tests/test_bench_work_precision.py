@@ -131,3 +131,14 @@ def test_time_limit_and_bad_input_are_data_or_errors():
 def test_bad_options_are_refused(capsys):
     assert main(["bench", "work-precision", "--quick", "--time-limit", "-1", "--json"]) == 2
     assert "--time-limit" in capsys.readouterr().err
+
+
+def test_object_height_is_checked_and_lifts_the_box():
+    """[[objects]] z (the pinch's box in the air): the bottom's height above the ground, >= 0."""
+    from stiction.scene import SceneError, build_scene
+
+    cfg = {"urdf": "pinch-gripper.urdf", "free_flyer": False, "contacts": {"feet": False},
+           "objects": [{"name": "box", "xy": [0.0, 0.0], "z": 0.25}]}
+    assert build_scene(cfg).q0[-5] == pytest.approx(0.05 + 0.25)  # x y z | quaternion: z is the 5th from last
+    with pytest.raises(SceneError, match="z"):
+        build_scene({**cfg, "objects": [{"name": "box", "xy": [0.0, 0.0], "z": -0.1}]})
