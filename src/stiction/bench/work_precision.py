@@ -57,7 +57,7 @@ exact-law residual above); ``max_normal_velocity`` (m/s, the largest |u_n| of a 
 sliding faster than 1 um/s: the lift-off of eq. 78-79); ``penetration`` (m); ``steps``;
 ``own_unconverged_steps`` (steps that missed the method's own test: reported, not judged);
 ``duration`` (s simulated); ``measured_seconds_per_simulated_second``; ``time_limit`` (wall s);
-``seed`` (the cases are deterministic: 0).
+``law_tolerance``; ``seed`` (the cases are deterministic: 0).
 """
 from __future__ import annotations
 
@@ -73,8 +73,9 @@ NAME = "work-precision"
 HELP = "error against the exact answer vs wall time per simulated second, per scene and method (dt and tolerance sweeps)"
 FIELDS = ("scene", "method", "dt", "tol", "error", "seconds_per_simulated_second", "failed", "failure",
           "law_residual", "max_normal_velocity", "penetration", "steps", "own_unconverged_steps", "duration",
-          "measured_seconds_per_simulated_second", "time_limit", "seed")
-KEY_FIELDS = ("scene", "method", "dt", "tol", "duration")
+          "measured_seconds_per_simulated_second", "time_limit", "law_tolerance", "seed")
+# the judgement's parameters too: a resumed sweep never mixes rows judged by other limits
+KEY_FIELDS = ("scene", "method", "dt", "tol", "duration", "time_limit", "law_tolerance")
 DEFAULT_WORKERS = 1  # wall times: one case at a time
 
 G = 9.81
@@ -413,7 +414,8 @@ def evaluate(case: dict) -> dict:
         "failed": failure is not None, "failure": failure, "law_residual": res["law_residual"],
         "max_normal_velocity": res["max_normal_velocity"], "penetration": res["penetration"],
         "steps": res["steps"], "own_unconverged_steps": res["own_unconverged_steps"], "duration": duration,
-        "measured_seconds_per_simulated_second": measured, "time_limit": case["time_limit"], "seed": case["seed"],
+        "measured_seconds_per_simulated_second": measured, "time_limit": case["time_limit"],
+        "law_tolerance": case["law_tolerance"], "seed": case["seed"],
     }
 
 
