@@ -444,7 +444,11 @@ def cases(args) -> list[dict]:
         if m not in METHODS:
             raise ValueError(f"work-precision: unknown method {m!r} (known: {', '.join(METHODS)})")
     if not ms.available():
-        methods = [m for m in methods if m not in MUJOCO_METHODS]
+        asked = [m for m in (getattr(args, "methods", None) or ()) if m in MUJOCO_METHODS]
+        if asked:
+            raise ValueError(f"work-precision: {', '.join(asked)} need MuJoCo (the optional `bench` extra: "
+                             "pip install 'mujoco==4.0.*'), which is not importable")
+        methods = [m for m in methods if m not in MUJOCO_METHODS]  # the default set: MuJoCo when installed
     limit = getattr(args, "time_limit", None) or (QUICK_TIME_LIMIT if quick else TIME_LIMIT)
     law = getattr(args, "law_tolerance", LAW_TOLERANCE)
     if not (limit > 0 and math.isfinite(limit)):
