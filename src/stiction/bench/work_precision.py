@@ -345,8 +345,6 @@ def _mujoco_model(case: dict, sc):
     model = spec.compile()
     data = mujoco.MjData(model)
     if name.startswith("solo12"):
-        from ..robots import load_robot  # noqa: PLC0415
-
         state = ms.solo12_state(model, q0, None if name == "solo12-slope-slip" else sc.q_target)
     else:
         if name == "pinch":
