@@ -107,11 +107,13 @@ def test_classify_orders_the_modes():
 
 def test_bad_input_is_loud():
     with pytest.raises(ValueError, match="maps"):
-        st.cases(argparse.Namespace(quick=True, maps="incline,pile", methods=None))
+        st.cases(argparse.Namespace(quick=True, maps="incline,heap", methods=None))
     with pytest.raises(ValueError, match="methods"):
         st.cases(argparse.Namespace(quick=True, maps="incline", methods="exakt"))
     with pytest.raises(ValueError, match="multiple of 4"):
         st.tower_scene(10)
+    with pytest.raises(ValueError, match="2 n"):
+        st.pile_scene(16)
     with pytest.raises(ValueError, match="mass ratio"):
         st.stack_scene(-1.0, False)
 
@@ -190,3 +192,30 @@ def test_implicit_penalty_survives_far_past_the_explicit_limit():
     assert r["y"] > 100 * r["boundary"]
     assert "non-finite" not in r["failures"] and r["steps"] == 200
     assert r["penetration"] < 1e-5
+
+
+def test_pile_geometry_and_exact_rest():
+    """Each upper cube's corners lie on the top faces of the two cubes below it (inside their
+    outline), every gap is 0 at the start, and exact holds the 24-contact pile (3 layers)."""
+    from stiction.simulator import Simulator
+
+    scene, layers = st.pile_scene(24)
+    assert layers == [3, 2, 1] and len(scene.contacts) == 24
+    frames = [c.frame for c in scene.contacts[::4]]
+    centre = {f: scene.q0[7 * k:7 * k + 3] for k, f in enumerate(frames)}
+    for c in scene.contacts:
+        corner = centre[c.frame] + np.asarray(c.offset)
+        h = scene.halfspaces[c.halfspace]
+        if c.halfspace == 0:
+            assert corner[2] == pytest.approx(0.0, abs=1e-15)
+        else:
+            below = centre[h.frame]
+            assert abs(corner[0] - below[0]) < st.CUBE / 2 and abs(corner[1] - below[1]) <= st.CUBE / 2 + 1e-15
+            assert corner[2] == pytest.approx(below[2] + st.CUBE / 2, abs=1e-15)
+            assert h.frame != c.frame
+    sim = Simulator(scene)
+    sim.step()
+    assert np.abs(np.asarray(sim.data.q) - scene.q0).max() < 1e-12
+    r = run("pile", "exact", 24, 1e-8)
+    assert r["failure"] is None, r
+    assert r["drift"] < 1e-9 and r["tilt_deg"] < 1e-6

@@ -26,8 +26,10 @@ Maps (x × y):
   friction; and a · h_com < g · half width, so the stack does not tip, whatever the ratio);
 - ``incline``: slope angle × μ for the cube on an incline; the true boundary tan θ = μ: below it
   the cube sticks, above it slides at g (sin θ − μ cos θ) (eq. 65's two regimes);
-- ``tower``: contacts (a tower of n cubes, 4n contacts) × solver tolerance, at rest. Towers only:
-  the package has no pile scene (the array layouts are grid and tower);
+- ``tower``: contacts (a tower of n cubes, 4n contacts) × solver tolerance, at rest;
+- ``pile``: contacts × solver tolerance on a pile (:func:`pile_scene`: layers of n, n−1, ..., 1
+  cubes, each upper cube bridging two below; 12, 24, 40, 60 contacts), at rest. The package has no
+  pile scene file (the array layouts are grid and tower): the bench builds it from a tower's bodies;
 - ``penalty``: K × dt for the penalty formulation (eq. 83-84) on the cube at rest on a 30° slope
   (μ 0.6). The explicit limit drawn is symplectic Euler's on the stiffest contact mode: with
   springs K and dampers K β on every contact row, the modes of M⁻¹ K Jᵀ J are ω² = K λ(A)
@@ -62,8 +64,8 @@ from typing import Any
 import numpy as np
 
 NAME = "stability"
-HELP = ("stability maps: where each method fails (mass ratio x dt, mu x slope, contacts x tolerance, K x dt, "
-        "delta x zeta)")
+HELP = ("stability maps: where each method fails (mass ratio x dt, mu x slope, contacts x tolerance on towers "
+        "and piles, K x dt, delta x zeta)")
 FIELDS = ("map", "method", "x", "y", "failure", "failures", "x_name", "y_name", "scene", "dt", "tolerance",
           "steps", "residual", "penetration", "energy_gain", "drift", "drift_limit", "accel_error",
           "direction_error_deg", "tilt_deg", "unconverged_steps", "boundary", "seconds", "error")
@@ -72,7 +74,7 @@ DEFAULT_WORKERS = None
 
 FAILURE_MODES = ("non-finite", "time-limit", "own-solver-failed", "residual", "penetration", "energy-gain",
                  "stiction-violated", "sliding-wrong", "structure-lost")
-MAPS = ("stack-rest", "stack-slide", "incline", "tower", "penalty", "ode")
+MAPS = ("stack-rest", "stack-slide", "incline", "tower", "pile", "penalty", "ode")
 METHODS = ("exact", "ccp", "nakaoka", "pyramid", "penalty", "pinocchio-admm", "pinocchio-pgs")
 QUICK_METHODS = ("exact", "ccp", "penalty")
 
@@ -97,6 +99,7 @@ GRIDS = {
     "stack-slide": ([1.0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6], [1e-4, 3e-4, 1e-3, 3e-3, 1e-2]),
     "incline": ([10.0, 20.0, 25.0, 28.0, 32.0, 35.0, 40.0], [0.2, 0.4, 0.5, 0.6, 0.7, 0.8, 1.0]),
     "tower": ([8.0, 16.0, 32.0, 64.0], [1e-4, 1e-6, 1e-8, 1e-10]),
+    "pile": ([12.0, 24.0, 40.0, 60.0], [1e-4, 1e-6, 1e-8, 1e-10]),
     "penalty": ([1e3, 1e4, 1e5, 1e6, 1e7], [1e-4, 3e-4, 1e-3, 3e-3, 1e-2]),
     "ode": ([1e-4, 1e-3, 1e-2, 3e-2, 1e-1], [0.1, 0.3, 1.0, 3.0, 10.0]),
 }
@@ -105,6 +108,7 @@ QUICK_GRIDS = {
     "stack-slide": ([1.0, 1e6], [1e-3, 1e-2]),
     "incline": ([20.0, 35.0], [0.5, 0.6]),
     "tower": ([8.0, 32.0], [1e-4, 1e-8]),
+    "pile": ([12.0, 24.0], [1e-4, 1e-8]),
     "penalty": ([1e4, 1e6], [1e-3, 1e-2]),
     "ode": ([1e-3, 1e-1], [0.1, 1.0]),
 }
@@ -113,11 +117,14 @@ AXES = {  # (x name, y name, x log?, y log?)
     "stack-slide": ("mass ratio m_top/m_bottom", "dt (s)", True, True),
     "incline": ("slope angle (deg)", "mu", False, False),
     "tower": ("contacts (tower of contacts/4 cubes)", "solver tolerance", True, True),
+    "pile": ("contacts (pile: layers of n, n-1, ..., 1 cubes)", "solver tolerance", True, True),
     "penalty": ("penalty stiffness K (N/m)", "dt (s)", True, True),
     "ode": ("delta (s)", "zeta", True, True),
 }
 ODE_V0, ODE_MU = 1.0, 0.5  # cube-slide's launch speed and friction (checked against the scene in _setup)
-DURATION = {"stack-rest": 2.0, "stack-slide": 0.4, "incline": 2.0, "tower": 1.0, "penalty": 2.0, "ode": 0.4}
+DURATION = {"stack-rest": 2.0, "stack-slide": 0.4, "incline": 2.0, "tower": 0.5, "pile": 0.5, "penalty": 2.0,
+            "ode": 0.4}
+PILE_SPACING = 0.15  # m between neighbouring centres in a layer: a 5 cm gap; each upper cube spans two
 
 
 def add_arguments(parser) -> None:
@@ -203,6 +210,47 @@ def tower_scene(contacts: int):
                         "ground": {"mu": 0.5}})
 
 
+def pile_scene(contacts: int):
+    """A pile: layers of n, n-1, ..., 1 cubes in the x-z plane, neighbours PILE_SPACING apart, each
+    upper cube resting on the two below it (two corners on each one's top face), n >= 2. Returns
+    (scene, cubes per layer). 4 contacts per cube: n(n+1)/2 cubes, 2n(n+1) contacts (12, 24, 40, 60).
+    Every contact face is horizontal, so the pile stands without friction; what it adds to a tower
+    is contacts that couple three bodies (each upper cube bridges two)."""
+    from ..scene import _corners, _halfspace, _sphere, build_scene
+
+    n = next((k for k in range(2, 40) if 2 * k * (k + 1) == contacts), None)
+    if n is None:
+        raise ValueError(f"pile contacts must be 2 n (n + 1) for n >= 2 layers (12, 24, 40, 60, ...), got {contacts}")
+    layers = [n - layer for layer in range(n)]
+    base = build_scene({"name": f"pile-{n}-layers", "array": {"layout": "tower", "count": sum(layers)},
+                        "ground": {"mu": 0.5}})
+    frames = [c.frame for c in base.contacts[::4]]  # each cube's body frame, in order
+    half = np.array([CUBE / 2] * 3)
+    halfspaces, contacts_out, q0 = [_halfspace("ground", (0, 0, 1), 0.0)], [], []
+    top_of: dict[int, int] = {}
+    k = 0
+    index = []  # index[layer][i] = cube number
+    for layer, count in enumerate(layers):
+        index.append([])
+        for i in range(count):
+            x = (i - (count - 1) / 2) * PILE_SPACING
+            q0.append([x, 0.0, (2 * layer + 1) * half[2], 0.0, 0.0, 0.0, 1.0])
+            for c, corner in enumerate(_corners(half, z_sign=-1)):
+                if layer == 0:
+                    target = 0
+                else:
+                    below = index[layer - 1][i + (1 if corner[0] > 0 else 0)]
+                    if below not in top_of:
+                        halfspaces.append(_halfspace(f"top of body{below}", (0, 0, 1), float(half[2]), frames[below]))
+                        top_of[below] = len(halfspaces) - 1
+                    target = top_of[below]
+                contacts_out.append(_sphere(f"body{k}-corner{c}", frames[k], corner, 0.0, target, 0.5))
+            index[layer].append(k)
+            k += 1
+    return dataclasses.replace(base, name=f"pile-{n}-layers", q0=np.concatenate(q0), halfspaces=halfspaces,
+                               contacts=contacts_out), layers
+
+
 def penalty_explicit_limit(stiffness, lambda_max: float, beta: float = PENALTY_BETA):
     """Largest dt symplectic (explicit) Euler is stable for springs K, dampers K beta on every row:
     h < -beta + sqrt(beta^2 + 4 / (K lambda_max(A))) (derived in the module docstring; eq. 83-84)."""
@@ -230,7 +278,7 @@ def _setup(case: dict):
     ov: dict[str, Any] = {"duration": DURATION[m]}
     if method not in ("exact-rk4",):
         ov["formulation"] = method
-    checks: dict[str, Any] = {"stick": [], "stick_relative": None, "slide": None, "stacked": False, "boundary": None}
+    checks: dict[str, Any] = {"anchored": False, "stick": [], "stick_relative": None, "slide": None, "stacked": False, "boundary": None}
     if m in ("stack-rest", "stack-slide"):
         scene = stack_scene(x, m == "stack-slide")
         ov.update(dt=y, tolerance=SOLVER_TOLERANCE)
@@ -250,6 +298,11 @@ def _setup(case: dict):
         else:
             checks["slide"] = {"bodies": [0], "accel": np.array([G * (math.sin(th) - y * math.cos(th)), 0.0, 0.0]),
                                "v0": 0.0}
+    elif m == "pile":
+        scene, layers = pile_scene(int(round(x)))
+        ov.update(dt=1e-3, tolerance=y)
+        checks["stick"] = list(range(sum(layers)))
+        checks["anchored"] = True
     elif m == "tower":
         scene = tower_scene(int(round(x)))
         ov.update(dt=1e-3, tolerance=y)
@@ -328,6 +381,9 @@ def measures(scene, traj, checks: dict, duration: float) -> dict:
         for k in range(1, len(pos)):
             offset = np.linalg.norm((pos[k] - pos[k - 1])[:, :2], axis=1).max()
             fell = fell or offset > CUBE / 2
+    if checks.get("anchored"):  # a pile: no body may move by half its width
+        for p in pos:
+            fell = fell or np.linalg.norm((p - p[0])[:, :2], axis=1).max() > CUBE / 2
     out["fell"] = fell
     # stiction: the tangential drift (x, y: the ground's plane) of the bodies, or of one relative to
     # another, that the exact law holds (normal motion is penetration's business)
