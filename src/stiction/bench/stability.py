@@ -220,7 +220,8 @@ def pile_scene(contacts: int):
 
     n = next((k for k in range(2, 40) if 2 * k * (k + 1) == contacts), None)
     if n is None:
-        raise ValueError(f"pile contacts must be 2 n (n + 1) for n >= 2 layers (12, 24, 40, 60, ...), got {contacts}")
+        raise ValueError(f"pile contacts must be 2 n (n + 1) for n >= 2 layers (12, 24, 40, 60, ...), "
+                         f"got {contacts}")
     layers = [n - layer for layer in range(n)]
     base = build_scene({"name": f"pile-{n}-layers", "array": {"layout": "tower", "count": sum(layers)},
                         "ground": {"mu": 0.5}})
@@ -241,7 +242,8 @@ def pile_scene(contacts: int):
                 else:
                     below = index[layer - 1][i + (1 if corner[0] > 0 else 0)]
                     if below not in top_of:
-                        halfspaces.append(_halfspace(f"top of body{below}", (0, 0, 1), float(half[2]), frames[below]))
+                        halfspaces.append(_halfspace(f"top of body{below}", (0, 0, 1), float(half[2]),
+                                                     frames[below]))
                         top_of[below] = len(halfspaces) - 1
                     target = top_of[below]
                 contacts_out.append(_sphere(f"body{k}-corner{c}", frames[k], corner, 0.0, target, 0.5))
@@ -278,7 +280,8 @@ def _setup(case: dict):
     ov: dict[str, Any] = {"duration": DURATION[m]}
     if method not in ("exact-rk4",):
         ov["formulation"] = method
-    checks: dict[str, Any] = {"anchored": False, "stick": [], "stick_relative": None, "slide": None, "stacked": False, "boundary": None}
+    checks: dict[str, Any] = {"anchored": False, "stick": [], "stick_relative": None, "slide": None,
+                              "stacked": False, "boundary": None}
     if m in ("stack-rest", "stack-slide"):
         scene = stack_scene(x, m == "stack-slide")
         ov.update(dt=y, tolerance=SOLVER_TOLERANCE)
