@@ -230,7 +230,7 @@ def pile_scene(contacts: int):
     halfspaces, contacts_out, q0 = [_halfspace("ground", (0, 0, 1), 0.0)], [], []
     top_of: dict[int, int] = {}
     k = 0
-    index = []  # index[layer][i] = cube number
+    index: list[list[int]] = []  # index[layer][i] = cube number
     for layer, count in enumerate(layers):
         index.append([])
         for i in range(count):
