@@ -134,6 +134,10 @@ def test_quick_bench_end_to_end(tmp_path, problem_dir, capsys):
     again = json.loads(capsys.readouterr().out)
     assert again["resumed"] == len(rows) and len(again["rows"]) == len(rows)
     assert again["table"] == json.loads(json.dumps(result["table"]))
+    # another time limit is another case: nothing resumed from the 2 s rows
+    other = sweep.run(profiles, _args(problem_dir, "--out", str(out), "--sets", "robot", "--solvers", "default",
+                                      "--tols", "1e-8", "--time-limit", "3"), "x")
+    assert other["resumed"] == 0 and {r["time_limit"] for r in other["rows"]} == {3.0}
 
 
 def test_bad_options_are_loud(problem_dir):

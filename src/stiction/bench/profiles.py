@@ -36,7 +36,7 @@ NAME = "profiles"
 HELP = "solvers alone on FCLib and robot problem sets: performance/data profiles, false convergence"
 FIELDS = ("set", "problem", "solver", "ours", "seconds", "residual", "converged_claimed", "solved",
           "tol", "iterations", "contacts", "time_limit", "failure", "asked_tol")
-KEY_FIELDS = ("set", "problem", "solver", "tol")
+KEY_FIELDS = ("set", "problem", "solver", "tol", "time_limit")  # a resumed sweep never mixes limits
 DEFAULT_WORKERS = 1  # timings must not share the machine
 
 OURS = ("default", "nsgs", "admm", "newton")
