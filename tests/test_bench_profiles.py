@@ -5,10 +5,12 @@ import csv
 import json
 import math
 
+import h5py
 import numpy as np
 import pytest
 
-from stiction import cli
+import stiction
+from stiction import cli, fclib
 from stiction.bench import profiles, sweep
 
 
@@ -82,6 +84,12 @@ def test_robot_problem_set_is_seeded_cached_and_large(tmp_path, problem_dir):
     cats = {r["category"] for r in full}
     assert cats >= {"standing", "slipping", "impacts", "grasps"}
     assert len({r["name"] for r in full}) == len(full)
+    # every file is the problem its simulator solved: the forces it stored solve it (tolerance 1e-10)
+    for r in full:
+        P = fclib.load(r["path"])
+        with h5py.File(r["path"], "r") as f:
+            lam = f["solution/r"][()][fclib._to_stiction_order(P.contacts)]
+        assert stiction.exact_law_measures(P.problem(), lam).relative_residual <= 1e-9, r["name"]
     again = profiles.robot_problem_set(tmp_path)  # from the cache
     assert [r["name"] for r in again] == [r["name"] for r in full]
     other = profiles.robot_problem_set(tmp_path / "b", quick=True, seed=1)
