@@ -1,5 +1,6 @@
 #include "stiction/delassus.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -28,8 +29,8 @@ void DenseDelassus::addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,
   y.noalias() += A_.middleCols(offset, size) * dx;
 }
 
-Eigen::MatrixXd DenseDelassus::diagonalBlock(Eigen::Index offset, Eigen::Index size) const {
-  return A_.block(offset, offset, size, size);
+void DenseDelassus::diagonalBlock(Eigen::Index offset, Eigen::Index size, Eigen::Ref<Eigen::MatrixXd> out) const {
+  out = A_.block(offset, offset, size, size);
 }
 
 double DenseDelassus::relativeAsymmetry() const {
@@ -78,17 +79,33 @@ void SparseDelassus::addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,
   }
 }
 
-Eigen::MatrixXd SparseDelassus::diagonalBlock(Eigen::Index offset, Eigen::Index size) const {
-  Eigen::MatrixXd B = Eigen::MatrixXd::Zero(size, size);
+void SparseDelassus::diagonalBlock(Eigen::Index offset, Eigen::Index size, Eigen::Ref<Eigen::MatrixXd> out) const {
+  out.setZero();
   for (Eigen::Index k = 0; k < size; ++k)
     for (Matrix::InnerIterator it(A_, offset + k); it; ++it)
-      if (it.row() >= offset && it.row() < offset + size) B(it.row() - offset, k) = it.value();
-  return B;
+      if (it.row() >= offset && it.row() < offset + size) out(it.row() - offset, k) = it.value();
 }
 
 const Eigen::MatrixXd& SparseDelassus::dense() const {
-  std::call_once(dense_once_, [this] { dense_ = Eigen::MatrixXd(A_); });
+  std::call_once(dense_once_, [this] {
+    dense_ = Eigen::MatrixXd(A_);
+    dense_built_ = true;
+  });
   return dense_;
+}
+
+bool SparseDelassus::assignValues(const Matrix& A) {
+  if (dense_built_ || !A.isCompressed() || A.rows() != A_.rows() || A.cols() != A_.cols() ||
+      A.nonZeros() != A_.nonZeros())
+    return false;
+  const Eigen::Index n = A_.outerSize(), nnz = A_.nonZeros();
+  if (!std::equal(A.outerIndexPtr(), A.outerIndexPtr() + n + 1, A_.outerIndexPtr()) ||
+      !std::equal(A.innerIndexPtr(), A.innerIndexPtr() + nnz, A_.innerIndexPtr()))
+    return false;
+  std::copy(A.valuePtr(), A.valuePtr() + nnz, A_.valuePtr());
+  for (Eigen::Index k = 0; k < nnz; ++k) abs_.valuePtr()[k] = std::abs(A_.valuePtr()[k]);
+  diagonal_ = A_.diagonal();
+  return true;
 }
 
 double SparseDelassus::relativeAsymmetry() const {

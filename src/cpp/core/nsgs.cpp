@@ -81,7 +81,7 @@ void NsgsSolver::prepare(const ContactProblem& problem) {
     const int k = cons[i].size;
     Eigen::Map<Eigen::MatrixXd> G(blocks_.data() + packed_offsets_[i], k, k);
     Eigen::Map<Eigen::MatrixXd> G_inv(inverses_.data() + packed_offsets_[i], k, k);
-    G = problem.delassus().diagonalBlock(off[i], k);
+    problem.delassus().diagonalBlock(off[i], k, G);
     invertBlock(G, G_inv);
   }
   const Eigen::Index m = problem.numRows();

@@ -80,12 +80,17 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     for (std::size_t a = 0; a < sim.anchors.size(); ++a) cons.push_back(Constraint::bilateral(3));
     return cons;
   };
-  if (sd.sparse) {  // a new operator each step: its pattern follows the contacts
+  const bool same_blocks = sd.problem && sd.active == sd.problem_active;
+  if (sd.sparse && same_blocks && sd.sparse_delassus && sd.sparse_delassus->assignValues(sd.A_sparse)) {
+    sd.b_scaled = scale * sd.b;  // same contacts, same pattern: new values in place, no allocation
+    sd.problem->setB(sd.b_scaled);
+  } else if (sd.sparse) {  // a new pattern: the contacts changed
     sd.delassus.reset();
-    sd.problem = std::make_unique<ContactProblem>(std::make_shared<SparseDelassus>(sd.A_sparse, /*symmetric=*/true),
-                                                  scale * sd.b,
-                                                  constraints(), 1e-6, false);
-  } else if (!sd.problem || !sd.delassus || sd.active != sd.problem_active) {
+    sd.sparse_delassus = std::make_shared<SparseDelassus>(sd.A_sparse, /*symmetric=*/true);
+    sd.problem = std::make_unique<ContactProblem>(sd.sparse_delassus, scale * sd.b, constraints(), 1e-6, false);
+    sd.problem_active = sd.active;
+  } else if (!same_blocks || !sd.delassus) {
+    sd.sparse_delassus.reset();
     sd.delassus = std::make_shared<DenseDelassus>(sd.A);
     sd.problem = std::make_unique<ContactProblem>(sd.delassus, scale * sd.b, constraints(), 1e-6, false);
     sd.problem_active = sd.active;

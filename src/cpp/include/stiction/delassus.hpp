@@ -4,6 +4,7 @@
 // matrix-free operator can replace the dense one without changing them.
 #pragma once
 
+#include <atomic>
 #include <mutex>
 
 #include <Eigen/Core>
@@ -29,8 +30,14 @@ class DelassusOperator {
                                    const Eigen::Ref<const Eigen::VectorXd>& dx,
                                    Eigen::Ref<Eigen::VectorXd> y) const = 0;
 
-  /// The square diagonal block A[offset:offset+size, offset:offset+size].
-  virtual Eigen::MatrixXd diagonalBlock(Eigen::Index offset, Eigen::Index size) const = 0;
+  /// The square diagonal block A[offset:offset+size, offset:offset+size], written into `out`
+  /// (size x size; the solvers' per-step set-up, so no allocation).
+  virtual void diagonalBlock(Eigen::Index offset, Eigen::Index size, Eigen::Ref<Eigen::MatrixXd> out) const = 0;
+  Eigen::MatrixXd diagonalBlock(Eigen::Index offset, Eigen::Index size) const {
+    Eigen::MatrixXd block(size, size);
+    diagonalBlock(offset, size, block);
+    return block;
+  }
 
   /// A dense copy (for factorizations; a sparse operator would factorize sparsely instead).
   virtual const Eigen::MatrixXd& dense() const = 0;
@@ -63,7 +70,8 @@ class DenseDelassus final : public DelassusOperator {
   void addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,
                            const Eigen::Ref<const Eigen::VectorXd>& dx,
                            Eigen::Ref<Eigen::VectorXd> y) const override;
-  Eigen::MatrixXd diagonalBlock(Eigen::Index offset, Eigen::Index size) const override;
+  using DelassusOperator::diagonalBlock;
+  void diagonalBlock(Eigen::Index offset, Eigen::Index size, Eigen::Ref<Eigen::MatrixXd> out) const override;
   const Eigen::MatrixXd& dense() const override { return A_; }
   double relativeAsymmetry() const override;
   void multiplyTransposed(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
@@ -99,7 +107,8 @@ class SparseDelassus final : public DelassusOperator {
   void absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
   void addColumnBlockTimes(Eigen::Index offset, Eigen::Index size, const Eigen::Ref<const Eigen::VectorXd>& dx,
                            Eigen::Ref<Eigen::VectorXd> y) const override;
-  Eigen::MatrixXd diagonalBlock(Eigen::Index offset, Eigen::Index size) const override;
+  using DelassusOperator::diagonalBlock;
+  void diagonalBlock(Eigen::Index offset, Eigen::Index size, Eigen::Ref<Eigen::MatrixXd> out) const override;
   const Eigen::MatrixXd& dense() const override;
   double relativeAsymmetry() const override;
   void multiplyTransposed(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
@@ -111,6 +120,10 @@ class SparseDelassus final : public DelassusOperator {
   bool allFinite() const override;
   const Matrix* sparse() const override { return &A_; }
   Eigen::Index nonZeros() const { return A_.nonZeros(); }
+  /// Take the values of `A` when it has this operator's pattern (the simulator's A from one step
+  /// to the next while the same contacts are active): O(entries), no allocation. Returns false and
+  /// changes nothing when the pattern differs or dense() was already built (its copy would go stale).
+  bool assignValues(const Matrix& A);
 
  private:
   Matrix A_;
@@ -118,6 +131,7 @@ class SparseDelassus final : public DelassusOperator {
   Eigen::VectorXd diagonal_;  // computed once (a sparse diagonal is a search per column)
   bool symmetric_ = false;
   mutable std::once_flag dense_once_;
+  mutable std::atomic<bool> dense_built_{false};
   mutable Eigen::MatrixXd dense_;
 };
 

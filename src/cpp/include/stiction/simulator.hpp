@@ -247,6 +247,7 @@ class SimulatorData {
   Eigen::VectorXd tau, nle, v_free, dv, guess, q_tmp, row_velocity, zero_nv, b_scaled;
   Eigen::VectorXd frame_turn;  ///< omega x v on each free flyer's linear rows, 0 elsewhere
   std::shared_ptr<DenseDelassus> delassus;  ///< dense problems: updated in place from step to step
+  std::shared_ptr<SparseDelassus> sparse_delassus;  ///< sparse problems: values updated in place while the pattern holds
   std::unique_ptr<ContactProblem> problem;
   std::vector<int> problem_active;
   std::unique_ptr<ContactSolver> solver;
