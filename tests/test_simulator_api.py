@@ -20,7 +20,7 @@ def test_unknown_override_names_it_and_the_closest():
     ("duration", math.inf, ValueError), ("mode", "rk5", ValueError), ("delta", -1.0, ValueError),
     ("zeta", 0.0, ValueError), ("mu", -0.5, ValueError), ("mu", [0.5], TypeError), ("tolerance", 0.0, ValueError),
     ("max_iterations", 0, ValueError), ("max_iterations", 2.5, ValueError), ("solver", "pgs", ValueError),
-    ("ode_tolerance", -1.0, ValueError),
+    ("ode_tolerance", -1.0, ValueError), ("warm_start", 0, ValueError), ("warm_start", "no", ValueError),
 ])
 def test_bad_override_values(key, value, exc):
     with pytest.raises(exc, match=key):
@@ -30,7 +30,7 @@ def test_bad_override_values(key, value, exc):
 def test_every_override_takes_effect():
     base = Simulator("cube-slide")
     changed = {"dt": 5e-4, "mode": "rk4", "delta": 2e-3, "zeta": 0.7, "tolerance": 1e-9, "max_iterations": 50,
-               "solver": "nsgs", "ode_tolerance": 1e-5}
+               "solver": "nsgs", "ode_tolerance": 1e-5, "warm_start": False}
     sim = Simulator("cube-slide", **changed)
     for key, value in changed.items():
         got = sim.settings.mode.name if key == "mode" else getattr(sim.settings, key)
@@ -39,7 +39,7 @@ def test_every_override_takes_effect():
     assert Simulator("cube-slide", mode="ode").settings.mode.name == "rk4"
     assert Simulator("cube-slide", duration=0.25).rollout().t[-1] == pytest.approx(0.25)
     assert set(OVERRIDES) == {"dt", "duration", "mode", "delta", "zeta", "mu", "tolerance", "max_iterations",
-                              "solver", "ode_tolerance", "formulation", "pyramid_facets", "pyramid_inscribed",
+                              "solver", "ode_tolerance", "warm_start", "formulation", "pyramid_facets", "pyramid_inscribed",
                               "penalty_stiffness", "penalty_damping"}
     # the formulation and its parameters (one formulation at a time: the others' parameters are refused)
     for name, params in (("pyramid", {"pyramid_facets": 8, "pyramid_inscribed": True}),
@@ -49,6 +49,14 @@ def test_every_override_takes_effect():
         fs, default = sim.settings.formulation_settings, base.settings.formulation_settings
         for key, value in params.items():
             assert getattr(fs, key) == value != getattr(default, key), key
+
+
+def test_cold_solves_take_more_iterations_for_the_same_motion():
+    """warm_start=False: every step's solve starts from zero; the motion is the same (to the
+    tolerance), the iterations are not."""
+    warm, cold = (Simulator("cube-incline-stick", solver="nsgs", warm_start=w).rollout(0.2) for w in (True, False))
+    assert np.abs(warm.q - cold.q).max() <= 1e-9
+    assert cold.iterations[1:].sum() > 2 * warm.iterations[1:].sum()
 
 
 def test_mu_override_changes_the_physics():

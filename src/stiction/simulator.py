@@ -84,6 +84,7 @@ OVERRIDES = {
     "tolerance": "contact solver tolerance on the relative residual",
     "max_iterations": "contact solver iteration budget per solve",
     "solver": "contact solver name (stiction.solver_names())",
+    "warm_start": "start each step's solve from the previous step's impulses (default True; False: from zero)",
     "ode_tolerance": "adaptive mode: local error tolerance",
     "formulation": "how each step's problem is resolved (stiction.formulation_names(); default exact)",
     "pyramid_facets": "pyramid formulation: facets per friction cone (>= 3, default 4)",
@@ -188,6 +189,10 @@ class Simulator:
         if solver not in _core.solver_names():
             raise ValueError(f"solver must be one of {', '.join(_core.solver_names())}, got {solver!r}")
         s.solver = solver
+        warm = overrides.get("warm_start", True)
+        if not isinstance(warm, (bool, np.bool_)):
+            raise ValueError(f"warm_start must be True or False, got {warm!r}")
+        s.warm_start = bool(warm)
         formulation = check_formulation(overrides.get("formulation", "exact"))
         s.formulation = formulation
         fs = formulation_settings(formulation, {k: overrides[k] for k in FORMULATION_PARAMETERS if k in overrides})

@@ -235,19 +235,9 @@ def _reference_error(name: str, duration: float, base_z: float, feet: np.ndarray
 
 # ---------------------------------------------------------------- one case
 def _stiction_simulator(sc, overrides: dict):
-    from .. import _core  # noqa: PLC0415
     from ..simulator import Simulator  # noqa: PLC0415
 
-    overrides = dict(overrides)
-    warm = overrides.pop("warm_start", True)
-    sim = Simulator(sc, **overrides)
-    if not warm:  # SimulatorSettings.warm_start: not a Simulator override; rebuild the model with it off
-        s = sim.model.settings
-        s.warm_start = False
-        sim.model = _core.SimulatorModel(sc.model, sc.halfspaces, sc.contacts, sc.anchors, s, sc.geometry, sc.pairs)
-        sim.data = _core.SimulatorData(sim.model)
-        sim.reset()
-    return sim
+    return Simulator(sc, **overrides)
 
 
 def _run_stiction(case: dict, sc) -> dict:
