@@ -321,12 +321,21 @@ def _command_line(args) -> str:
 
 
 def _print_bench(module, result: dict) -> None:
-    """A short human summary: the rows as a table (first columns), then the summary keys."""
+    """A short human summary: the bench's own report when it has one, else the rows as a table
+    (first columns), then the summary keys."""
+    if hasattr(module, "report"):
+        print(module.report(result))
+        for f in result.get("files", []):
+            print(f"wrote {f}")
+        return
     rows = result["rows"]
     fields = list(module.FIELDS)[:8]
     print("  ".join(f"{f:>14.14}" for f in fields))
-    for r in rows:
+    shown = 40
+    for r in rows[:shown]:
         print("  ".join(f"{_short(r[f]):>14.14}" for f in fields))
+    if len(rows) > shown:
+        print(f"... {len(rows) - shown} more rows (all of them with --json, or in the CSV with --out)")
     for k, v in result.items():
         if k not in ("command", "stamp", "rows", "files"):
             print(f"{k}: {_short(v) if not isinstance(v, (dict, list)) else json.dumps(v)[:200]}")
