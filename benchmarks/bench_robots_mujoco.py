@@ -9,7 +9,8 @@ exits 0.
 
 Scenes (default): solo12-stand, go2-stand, anymal-stand, talos-stand, ur5-push-wall,
 ur5-push-box, solo12-slope-stick (joints locked, gravity tilted 15°, as stiction models the slope) and
-solo12-on-board (Solo-12 on a free board on the ground: contacts between two bodies). The MuJoCo twin of each is built by ``stiction.bench.mujoco_robots.mujoco_twin``
+solo12-on-board (Solo-12 on a free board on the ground: contacts between two bodies). The MuJoCo
+twin of each is built by ``stiction.bench.mujoco_robots.mujoco_twin``
 from the scene's own Pinocchio model (same masses, inertias, joint frames, contact spheres and
 points on the same links, joint PD, initial state, dt, μ, gravity); MuJoCo: elliptic cones,
 Newton, 100 iterations, tolerance 1e-10, implicitfast, impratio 1 (and any ``--impratio``), its
@@ -204,9 +205,10 @@ def run(scenes: list[str], repeats: int, duration: float, impratios: tuple[float
                         value, cpu = value
                         times[c.name][f"{n} cpu"].append(cpu)
                     times[c.name][n].append(value)
-        print(f"repetition {rep + 1}/{repeats}: " + ", ".join(
-            f"{c.name} {times[c.name]['stiction rollout'][-1] / times[c.name][f'mujoco {impratios[0]:g} rollout'][-1]:.2f}"
-            for c in cases), file=sys.stderr, flush=True)
+        first = f"mujoco {impratios[0]:g} rollout"
+        print(f"repetition {rep + 1}/{repeats}, stiction / MuJoCo: " + ", ".join(
+            f"{c.name} {times[c.name]['stiction rollout'][-1] / times[c.name][first][-1]:.2f}" for c in cases),
+            file=sys.stderr, flush=True)
     rows = []
     for c in cases:
         t = times[c.name]
@@ -217,7 +219,8 @@ def run(scenes: list[str], repeats: int, duration: float, impratios: tuple[float
                 paired = [a / b for a, b in zip(t[f"stiction {kind}"], t[f"mujoco {r:g} {kind}"])]
                 row["ratio"][f"{kind} vs impratio {r:g}"] = spread(paired)
                 # the fastest run of each: the least disturbed by the machine's other work
-                row["ratio"][f"{kind} vs impratio {r:g}, fastest"] = min(t[f"stiction {kind}"]) / min(t[f"mujoco {r:g} {kind}"])
+                row["ratio"][f"{kind} vs impratio {r:g}, fastest"] = (min(t[f"stiction {kind}"])
+                                                                      / min(t[f"mujoco {r:g} {kind}"]))
         rows.append(row)
     return {
         "command": " ".join([Path(sys.argv[0]).name] + sys.argv[1:]),
@@ -241,7 +244,8 @@ def markdown(res: dict) -> str:
         f"{res['duration']:g} s per scene, {res['repeats']} alternating repetitions, single thread, medians "
         "(min–max over repetitions).",
         "",
-        f"## stiction / MuJoCo per step (MuJoCo impratio {r0:g}): median over repetitions of the paired ratio (min–max)",
+        f"## stiction / MuJoCo per step (MuJoCo impratio {r0:g}): "
+        "median over repetitions of the paired ratio (min–max)",
         "",
         "| scene | nv | contacts | **rollout, CPU time** | rollout, wall time | one step from Python | "
         "fastest rollouts (wall) |",
@@ -255,7 +259,8 @@ def markdown(res: dict) -> str:
         ratio = row["ratio"]
         lines.append(f"| {row['scene']} | {row['nv']} | {row['contacts']} | "
                      f"**{cell(ratio[f'rollout cpu vs impratio {r0:g}'], '.2f')}** | "
-                     f"{cell(ratio[f'rollout vs impratio {r0:g}'], '.2f')} | {cell(ratio[f'steps vs impratio {r0:g}'], '.2f')} | "
+                     f"{cell(ratio[f'rollout vs impratio {r0:g}'], '.2f')} | "
+                     f"{cell(ratio[f'steps vs impratio {r0:g}'], '.2f')} | "
                      f"{ratio[f'rollout vs impratio {r0:g}, fastest']:.2f} |")
     lines += [
         "",
@@ -268,7 +273,8 @@ def markdown(res: dict) -> str:
     for row in res["rows"]:
         us = row["us"]
         cpp = row["accuracy"]["stiction"]["phases_us"]["total"]
-        lines.append(f"| {row['scene']} | {cell(us['stiction rollout cpu'])} | {cell(us[f'mujoco {r0:g} rollout cpu'])} | "
+        lines.append(f"| {row['scene']} | {cell(us['stiction rollout cpu'])} | "
+                     f"{cell(us[f'mujoco {r0:g} rollout cpu'])} | "
                      f"{cell(us['stiction rollout'])} | {cell(us[f'mujoco {r0:g} rollout'])} | "
                      f"{cell(us['stiction steps'])} | {cell(us[f'mujoco {r0:g} steps'])} | {cpp:.1f} |")
     for r in res["impratios"][1:]:

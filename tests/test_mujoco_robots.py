@@ -173,7 +173,8 @@ def test_bench_script_runs_and_reports_every_scene_asked(capsys):
             assert row["us"][key]["median"] > 0
         for kind in ("rollout", "rollout cpu", "steps"):  # one repetition: the ratio of the two runs
             ratio = row["ratio"][f"{kind} vs impratio 1"]["median"]
-            assert ratio == pytest.approx(row["us"][f"stiction {kind}"]["median"] / row["us"][f"mujoco 1 {kind}"]["median"])
+            us = row["us"]
+            assert ratio == pytest.approx(us[f"stiction {kind}"]["median"] / us[f"mujoco 1 {kind}"]["median"])
         acc = row["accuracy"]
         assert acc["stiction"]["converged"]
         assert acc["stiction"]["penetration"] < 1e-6 < acc["mujoco impratio 1"]["penetration"]

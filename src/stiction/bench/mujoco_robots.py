@@ -218,7 +218,8 @@ def mujoco_twin(scene, impratio: float = 1.0, point_radius: float = POINT_RADIUS
         body.quat = _quat_wxyz(placement.rotation)
         if shortname in _HINGE or shortname in ("JointModelRevoluteUnaligned", "JointModelRevoluteUnboundedUnaligned"):
             axis = _HINGE.get(shortname) or np.asarray(model.joints[j].extract().axis, dtype=float)
-            jtype, kinds[j] = mj.mjtJoint.mjJNT_HINGE, "hinge-unbounded" if "RUB" in shortname or "Unbounded" in shortname else "hinge"
+            unbounded = "RUB" in shortname or "Unbounded" in shortname  # (cos, sin) in Pinocchio
+            jtype, kinds[j] = mj.mjtJoint.mjJNT_HINGE, "hinge-unbounded" if unbounded else "hinge"
         elif shortname in _SLIDE or shortname == "JointModelPrismaticUnaligned":
             axis = _SLIDE.get(shortname) or np.asarray(model.joints[j].extract().axis, dtype=float)
             jtype, kinds[j] = mj.mjtJoint.mjJNT_SLIDE, "slide"
