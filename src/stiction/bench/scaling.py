@@ -131,6 +131,11 @@ def evaluate(case: dict) -> dict:
             "max_body_drift": m["max_body_drift"]}
 
 
+def result_stem(args) -> str:
+    """scaling.json for the grid, scaling-tower.json for the tower (one CSV holds both)."""
+    return "scaling" if args.layout == "grid" else f"scaling-{args.layout}"
+
+
 def summarize(rows: list[dict]) -> dict:
     layouts = sorted({r["layout"] for r in rows})
     out = {"layout": layouts[0] if len(layouts) == 1 else layouts,

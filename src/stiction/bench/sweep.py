@@ -14,6 +14,7 @@ A bench is one module of :mod:`stiction.bench` with this contract::
                                        # a failing method is data (failed / failure), never an exception
     def summarize(rows) -> dict        # extra top-level keys of the JSON
     def plot(rows, out_dir, stamp) -> list[Path]
+    def result_stem(args) -> str       # optional: OUT/<stem>.json when one CSV holds several runs
 
 Rows do not depend on where a case ran: a case is evaluated by the same function, from the same
 parameters (seeds included), in a local process or on a Dask worker. Rows are appended to
@@ -277,7 +278,7 @@ def _finite_or_none(value):
 
 def run(module: ModuleType, args: argparse.Namespace, command: str) -> dict:
     """Cases → rows (skipping those already in OUT/NAME.csv) → summary → charts. Returns the result
-    that ``--json`` prints: {"command", "stamp", "rows", **module.summarize(rows), "files"}."""
+    that ``--json`` prints: ``{"command", "stamp", "rows", **module.summarize(rows), "resumed", "files"}``."""
     st = stamp(command)
     cases = module.cases(args)
     keys = [case_key(c, module.KEY_FIELDS) for c in cases]
@@ -321,7 +322,8 @@ def run(module: ModuleType, args: argparse.Namespace, command: str) -> dict:
         files = [str(p) for p in module.plot(rows, out, st)]
         files.append(str(out / f"{module.NAME}.csv"))
         result["files"] = files
-        with open(out / f"{module.NAME}.json", "w") as fh:
+        stem = module.result_stem(args) if hasattr(module, "result_stem") else module.NAME
+        with open(out / f"{stem}.json", "w") as fh:
             json.dump(_finite_or_none(result), fh, indent=1, allow_nan=False)
             fh.write("\n")
     return _finite_or_none(result)

@@ -1,22 +1,22 @@
-"""Work-precision: error against the exact answer vs wall time per simulated second, per scene
+r"""Work-precision: error against the exact answer vs wall time per simulated second, per scene
 and method, sweeping the time step dt and the solver tolerance (``stiction bench work-precision``).
 
 **Scenes and their exact answers** (error in metres, always):
 
 - ``cube-slide``: 1 kg cube thrown at v0 = 1 m/s, mu = 0.5: it stops after d = v0^2 / (2 mu g);
   symplectic Euler (time stepping, MuJoCo) stops at d - v0 dt / 2, so that offset is removed
-  for them. error = max(|x(T) - x0 - d'|, max_t |z - z0|, max_t |y - y0|) (a hop counts).
+  for them. error = max(\|x(T) - x0 - d'\|, max_t \|z - z0\|, max_t \|y - y0\|) (a hop counts).
 - ``cube-incline-stick`` (30 deg, mu = 0.6), ``two-cube-stack``, ``pinch`` (the cube held
   between two squeezing pads, robots/scenes/pinch.toml): nothing moves. error = the largest
   displacement of a free body's centre over the run.
 - ``cube-incline-slip`` (30 deg, mu = 0.5) and ``solo12-slope-slip`` (rigid Solo-12, 20 deg,
   mu = 0.2): translation downhill at a = g (sin th - mu cos th): s(T) = a T^2 / 2 (+ a dt T / 2,
-  symplectic Euler's offset). error = max(|x(T) - x0 - s(T)|, max_t |z - z0|, max_t |y - y0|).
+  symplectic Euler's offset). error = max(\|x(T) - x0 - s(T)\|, max_t \|z - z0\|, max_t \|y - y0\|).
 - ``diagonal-push``: the cube of cube-slide from rest, pushed through its centre by
   F = 1.5 mu m g at 30 deg (body frame; stiction.casestudies.diagonal_push): the exact cone
-  slides it along the push at a = 0.5 mu g. error = max(|p_xy(T) - p0 - s(T) e_phi|, max_t |z - z0|).
+  slides it along the push at a = 0.5 mu g. error = max(\|p_xy(T) - p0 - s(T) e_phi\|, max_t \|z - z0\|).
 - ``solo12-stand``: no closed form for the settling robot: a converged reference (exact law, default
-  solver, dt = 1e-5 s, tolerance 1e-11). error = max(|base height(T) - reference|, largest
+  solver, dt = 1e-5 s, tolerance 1e-11). error = max(\|base height(T) - reference\|, largest
   horizontal distance of a foot-sphere centre at T from the reference's).
 
 **Methods**: the formulations (exact, ccp, nakaoka, pyramid = 4 facets circumscribed, penalty
@@ -38,8 +38,8 @@ velocities (stiction's records: J v after the step, so the stabilisation that pu
 penetration out counts, ~1e-5 on Solo-12; MuJoCo's contacts, the same quantity) are scored against the exact law (eq. 65:
 Signorini, the cone, maximum dissipation) in physical units, forces / (m g) and velocities /
 v_ref (m the scene's total mass, v_ref = sqrt(g L), L its body size), per contact, as a
-min-map: normal max(-lam_n / (m g), min(lam_n / (m g), |u_n| / v_ref)); friction
-min(|u_t| / v_ref + (|lam_t| - mu lam_n)+ / (m g), |lam_t + mu lam_n u_t / |u_t|| / (m g))
+min-map: normal max(-lam_n / (m g), min(lam_n / (m g), \|u_n\| / v_ref)); friction
+min(\|u_t\| / v_ref + (\|lam_t\| - mu lam_n)+ / (m g), \|lam_t + mu lam_n u_t / \|u_t\|\| / (m g))
 (sticking, or sliding with the friction opposite the slip on the cone). ``law_residual`` is
 the largest over contacts and steps. A run fails (``failed``, ``failure`` the first mode) when
 its state is not finite, the simulator stops, it exceeds the time limit, it penetrates more than
@@ -53,7 +53,7 @@ cross on the chart's top edge.
 (m; None/NaN when the run stopped); ``seconds_per_simulated_second`` (the limit's for a failed
 run); ``failed``; ``failure`` (None, "exact-law residual", "penetration", "time-limit",
 "non-finite", "stopped: <message>" or "error: <exception>"); ``law_residual`` (the physical
-exact-law residual above); ``max_normal_velocity`` (m/s, the largest |u_n| of a loaded contact
+exact-law residual above); ``max_normal_velocity`` (m/s, the largest \|u_n\| of a loaded contact
 sliding faster than 1 um/s: the lift-off of eq. 78-79); ``penetration`` (m); ``steps``;
 ``own_unconverged_steps`` (steps that missed the method's own test: reported, not judged);
 ``duration`` (s simulated); ``measured_seconds_per_simulated_second``; ``time_limit`` (wall s);
