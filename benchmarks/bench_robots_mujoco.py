@@ -48,7 +48,6 @@ import json
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -58,6 +57,7 @@ import pinocchio as pin
 
 import stiction
 from stiction import _core
+from stiction.bench import sweep
 from stiction.bench import mujoco_robots
 from stiction.simulator import PHASES, Simulator
 
@@ -152,22 +152,12 @@ class Case:
 
 
 def git_revision() -> str:
-    root = Path(__file__).resolve().parents[1]
-    try:
-        head = subprocess.run(["git", "-C", root, "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                              check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", root, "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "git revision unknown"
-    return f"git {head}{' + local changes' if dirty else ''}"
+    rev = sweep.git_revision()
+    return "git revision unknown" if rev is None else "git " + rev.replace("+dirty", " + local changes")
 
 
 def machine() -> str:
-    with open("/proc/cpuinfo") as f:
-        cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")),
-                   platform.processor() or "?")
-    return f"{platform.machine()} ({cpu}, {os.cpu_count()} cores)"
+    return f"{platform.machine()} ({sweep.cpu_model()}, {os.cpu_count()} cores)"
 
 
 def spread(values: list[float]) -> dict:

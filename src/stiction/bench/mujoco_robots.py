@@ -36,6 +36,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from .mujoco_scenes import _mujoco, available  # MuJoCo is the optional bench extra: imported on use
+
 POINT_RADIUS = 1e-3  # m: the sphere standing for a stiction point contact
 WALL_HALF_THICKNESS = 0.05  # m: the box standing for a half-space that moves with a body
 WALL_HALF_WIDTH = 2.0  # m
@@ -45,21 +47,6 @@ TOLERANCE = 1e-10
 _HINGE = {"JointModelRX": (1, 0, 0), "JointModelRY": (0, 1, 0), "JointModelRZ": (0, 0, 1),
           "JointModelRUBX": (1, 0, 0), "JointModelRUBY": (0, 1, 0), "JointModelRUBZ": (0, 0, 1)}
 _SLIDE = {"JointModelPX": (1, 0, 0), "JointModelPY": (0, 1, 0), "JointModelPZ": (0, 0, 1)}
-
-
-def _mujoco():
-    import mujoco  # noqa: PLC0415 - optional extra
-
-    return mujoco
-
-
-def available() -> bool:
-    """Whether MuJoCo (the ``bench`` extra) is importable."""
-    try:
-        _mujoco()
-    except ImportError:
-        return False
-    return True
 
 
 @dataclass

@@ -65,7 +65,7 @@ def _positive_int(text: str) -> int:
 
 # ---- stamps ---------------------------------------------------------------------------------------
 
-def _cpu_model() -> str:
+def cpu_model() -> str:
     try:
         with open("/proc/cpuinfo") as fh:
             for line in fh:
@@ -85,7 +85,7 @@ def _version(module: str) -> str | None:
         return None
 
 
-def _git_revision() -> str | None:
+def git_revision() -> str | None:
     """The commit of a source checkout (None for an installed wheel)."""
     here = Path(__file__).resolve().parent
     try:
@@ -105,9 +105,9 @@ def stamp(command: str) -> dict:
     versions = {name: _version(dist) for name, dist in
                 (("stiction", "stiction"), ("pinocchio", "pin"), ("numpy", "numpy"), ("mujoco", "mujoco"))}
     versions["python"] = platform.python_version()
-    return {"command": command, "machine": f"{_cpu_model()} ({platform.system()} {platform.machine()})",
+    return {"command": command, "machine": f"{cpu_model()} ({platform.system()} {platform.machine()})",
             "cores": os.cpu_count(), "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-            "versions": {k: v for k, v in versions.items() if v is not None}, "git": _git_revision()}
+            "versions": {k: v for k, v in versions.items() if v is not None}, "git": git_revision()}
 
 
 def stamp_text(st: dict) -> str:
