@@ -46,7 +46,8 @@ def test_csv_holds_the_rows_and_a_second_run_resumes(tmp_path):
     assert second["resumed"] == 2 and [r["x"] for r in second["rows"]] == [2, -3, 4]
     assert second["rows"][1] == {"x": -3, "label": "p-3", "square": 9.0, "failed": True}  # read back typed
     saved = json.loads((tmp_path / "toy.json").read_text())
-    assert saved["rows"] == second["rows"] and saved["stamp"]["command"] == "stiction bench toy"
+    assert saved["total"] == second["total"] and saved["stamp"]["command"] == "stiction bench toy"
+    assert saved["rows_csv"] == "toy.csv" and "rows" not in saved  # the rows once, in the CSV
 
 
 def test_an_interrupted_line_is_run_again_and_a_foreign_csv_is_refused(tmp_path):

@@ -18,7 +18,8 @@ A bench is one module of :mod:`stiction.bench` with this contract::
 
 Rows do not depend on where a case ran: a case is evaluated by the same function, from the same
 parameters (seeds included), in a local process or on a Dask worker. Rows are appended to
-``OUT/NAME.csv`` as they arrive, so an interrupted sweep resumes where it stopped.
+``OUT/NAME.csv`` as they arrive, so an interrupted sweep resumes where it stopped; ``OUT/NAME.json``
+holds the stamp and the summary (the rows are the CSV's).
 """
 from __future__ import annotations
 
@@ -323,7 +324,9 @@ def run(module: ModuleType, args: argparse.Namespace, command: str) -> dict:
         files.append(str(out / f"{module.NAME}.csv"))
         result["files"] = files
         stem = module.result_stem(args) if hasattr(module, "result_stem") else module.NAME
+        saved = {k: v for k, v in result.items() if k != "rows"}  # the rows are the CSV's (not twice)
+        saved["rows_csv"] = f"{module.NAME}.csv"
         with open(out / f"{stem}.json", "w") as fh:
-            json.dump(_finite_or_none(result), fh, indent=1, allow_nan=False)
+            json.dump(_finite_or_none(saved), fh, indent=1, allow_nan=False)
             fh.write("\n")
     return _finite_or_none(result)
