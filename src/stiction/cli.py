@@ -323,10 +323,8 @@ def _command_line(args) -> str:
 def _print_bench(module, result: dict) -> None:
     """A short human summary: the bench's own report when it has one, else the rows as a table
     (first columns), then the summary keys."""
-    if hasattr(module, "report"):
+    if hasattr(module, "report"):  # it names the files it wrote
         print(module.report(result))
-        for f in result.get("files", []):
-            print(f"wrote {f}")
         return
     rows = result["rows"]
     fields = list(module.FIELDS)[:8]
