@@ -166,3 +166,17 @@ def test_a_warm_started_medium_step_goes_from_a_stalled_gauss_seidel_to_admm():
     assert r.converged and 64 < len(r.lam) <= 384
     names = stage_names(r)
     assert names[-1] == "admm" and "newton" not in names, r.stages
+
+
+def test_a_warm_start_that_stalls_is_retried_from_zero():
+    """A 1e6 : 1 two-cube stack at dt = 0.1 ms: from the previous step's impulses, Newton stalls and
+    ADMM ran out of budget on 58 of 5000 steps (first at step 1843); from zero the same problems
+    converge. The simulator retries a missed warm-started solve from zero and keeps the better one."""
+    from stiction.bench.stability import stack_scene
+    from stiction.simulator import Simulator
+
+    sim = Simulator(stack_scene(1e6, False), dt=1e-4, tolerance=1e-8)
+    traj = sim.rollout(0.25)
+    assert traj.converged[1:].all()
+    assert traj.residual.max() <= 1e-8 * 1e-2  # far below the tolerance: a clean solve, not a lucky stop
+    assert np.abs(traj.q[-1] - traj.q[0]).max() <= 1e-9  # the stack rests

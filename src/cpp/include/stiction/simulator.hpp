@@ -210,6 +210,7 @@ class SimulatorData {
   Eigen::VectorXd gaps;              ///< signed distance per candidate contact
   Eigen::VectorXd lambda;            ///< forces per row of the last solve
   SolverResult result;               ///< the last solve
+  SolverResult cold_result;          ///< workspace: the retry from zero after a warm-started solve missed
 
   // Per candidate / anchor, after the last solve (inactive candidates: 0, open).
   Eigen::MatrixXd candidate_lambda;  ///< 3 x candidates, force (t1, t2, n); planar: t2 = 0; 1 row: t1 = t2 = 0
