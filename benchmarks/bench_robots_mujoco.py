@@ -151,13 +151,7 @@ class Case:
         return out
 
 
-def git_revision() -> str:
-    rev = sweep.git_revision()
-    return "git revision unknown" if rev is None else "git " + rev.replace("+dirty", " + local changes")
-
-
-def machine() -> str:
-    return f"{platform.machine()} ({sweep.cpu_model()}, {os.cpu_count()} cores)"
+git_revision, machine = sweep.git_description, sweep.machine_description
 
 
 def spread(values: list[float]) -> dict:

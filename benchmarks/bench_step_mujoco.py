@@ -236,13 +236,7 @@ def stiction_accuracy(sim: Simulator, traj) -> dict:
 
 
 # ---------------------------------------------------------------- report
-def git_revision() -> str:
-    rev = sweep.git_revision()
-    return "git revision unknown" if rev is None else "git " + rev.replace("+dirty", " + local changes")
-
-
-def machine() -> str:
-    return f"{platform.machine()} ({sweep.cpu_model()}, {os.cpu_count()} cores)"
+git_revision, machine = sweep.git_description, sweep.machine_description
 
 
 def fmt(x: float, spec: str) -> str:

@@ -145,15 +145,6 @@ def summarize(rows: list[dict]) -> dict:
     return out
 
 
-def run(sizes: list[int], steps: int = 200, layout: str = "grid") -> dict:
-    """The sweep without the CLI: {"layout", "rows", "exponent", "mujoco_exponent"}."""
-    import argparse
-
-    args = argparse.Namespace(sizes=sizes, steps=steps, layout=layout, quick=False)
-    rows = [evaluate(c) for c in cases(args)]
-    return {"rows": rows, **summarize(rows)}
-
-
 def plot(rows: list[dict], out_dir, stamp: dict) -> list:
     from pathlib import Path
 

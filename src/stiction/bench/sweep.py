@@ -44,6 +44,8 @@ COMMON_OPTIONS = ("json", "out", "quick", "cluster", "workers")
 
 
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
+    from ..cli import _positive_int  # the CLI's own integer check (called when the CLI builds its parser)
+
     parser.add_argument("--json", action="store_true", help='print {"command", "stamp", "rows", ...} as JSON')
     parser.add_argument("--out", metavar="DIR", help="write DIR/NAME.csv (resumable: cases already there are "
                         "skipped), DIR/NAME.json and the PNG charts")
@@ -52,16 +54,6 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                         "scheduler address, or 'local' for a LocalCluster on this machine (extra: cluster)")
     parser.add_argument("--workers", type=_positive_int, metavar="N",
                         help="local worker processes (default: the bench's; one per core for most)")
-
-
-def _positive_int(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: must be >= 1")
-    return n
 
 
 # ---- stamps ---------------------------------------------------------------------------------------
@@ -99,6 +91,16 @@ def git_revision() -> str | None:
     dirty = subprocess.run(["git", "-C", str(here), "status", "--porcelain", "--untracked-files=no"],
                            capture_output=True, text=True, timeout=5).stdout.strip()
     return out.stdout.strip() + ("+dirty" if dirty else "")
+
+
+def git_description() -> str:
+    """The commit in words, for the benchmark scripts' reports."""
+    rev = git_revision()
+    return "git revision unknown" if rev is None else "git " + rev.replace("+dirty", " + local changes")
+
+
+def machine_description() -> str:
+    return f"{platform.machine()} ({cpu_model()}, {os.cpu_count()} cores)"
 
 
 def stamp(command: str) -> dict:

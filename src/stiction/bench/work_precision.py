@@ -234,12 +234,6 @@ def _reference_error(name: str, duration: float, base_z: float, feet: np.ndarray
 
 
 # ---------------------------------------------------------------- one case
-def _stiction_simulator(sc, overrides: dict):
-    from ..simulator import Simulator  # noqa: PLC0415
-
-    return Simulator(sc, **overrides)
-
-
 def _run_stiction(case: dict, sc) -> dict:
     method, dt, tol, duration = case["method"], case["dt"], case["tol"], case["duration"]
     overrides = {"dt": dt, **STICTION_METHODS[method]}
@@ -248,7 +242,9 @@ def _run_stiction(case: dict, sc) -> dict:
         overrides["tolerance"] = BASE_TOL
     else:
         overrides["tolerance"] = tol
-    sim = _stiction_simulator(sc, overrides)
+    from ..simulator import Simulator  # noqa: PLC0415
+
+    sim = Simulator(sc, **overrides)
     # chunks of ~0.1 s simulated: the time limit is checked between them
     chunk = max(dt, min(duration, round(0.1 / dt) * dt))
     trajs, wall, stopped = [], 0.0, None
