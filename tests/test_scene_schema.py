@@ -57,7 +57,7 @@ BAD_SCENES = [
     ({"duration": 1.0}, ["exactly one of `robot`, `urdf`, `bodies` or `[array]`"]),
     ({"array": {"layout": "grid"}}, ["missing required key 'count'"]),
     ({"array": {"layout": "ring", "count": 2}}, ["ring"]),
-    ({"array": {"layout": "tower", "count": 2, "spacing": 0.3}}, ["spacing applies to layout = \"grid\" only"]),
+    ({"array": {"layout": "tower", "count": 2, "spacing": 0.3}}, ["spacing applies to layout = \"grid\" or \"pile\" only"]),
     ({"array": {"layout": "grid", "count": 0}}, ["count"]),
     ({"urdf": "cube.urdf", "array": {"layout": "grid", "count": 2}}, ["got urdf, array"]),
     ({"robot": "solo13"}, ["solo13", "solo12"]),

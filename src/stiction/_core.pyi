@@ -193,6 +193,7 @@ class GeometryPairContact:
     mu: float
     name: str
     pair: int
+    patch: bool
 
 class HalfSpace:
     """Free space {x : normal . x >= offset}; a ground or a wall."""
@@ -274,6 +275,12 @@ class SimulatorData:
 
     @property
     def nle(self) -> numpy.ndarray: ...
+
+    @property
+    def pair_normals(self) -> numpy.ndarray: ...
+
+    @property
+    def pair_points(self) -> numpy.ndarray: ...
 
     @property
     def parts(self) -> int: ...

@@ -217,6 +217,7 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
     halfspaces = [_halfspace("ground", (0, 0, 1), 0.0)]
     contacts: list = []
     urdf_path = None
+    pile_geometry = pile_pairs = None
     if cfg["robot"] is not None or cfg["urdf"] is not None:
         if cfg["robot"] is not None:
             from .robots import ROBOTS
@@ -269,6 +270,10 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
         if cfg["array"] is not None and cfg["array"]["layout"] == "grid":
             a = cfg["array"]
             model, visual, q0, contacts = _grid_bodies(a["urdf"], a["count"], a["spacing"], mu, base_dir, cmodel)
+        elif cfg["array"] is not None and cfg["array"]["layout"] == "pile":
+            a = cfg["array"]
+            model, visual, q0, contacts, pile_geometry, pile_pairs = _pile_bodies(
+                a["urdfs"], a["count"], a["spacing"], a["seed"], mu, base_dir, cmodel)
         else:
             paths = cfg["bodies"] if cfg["bodies"] is not None else [cfg["array"]["urdf"]] * cfg["array"]["count"]
             model, visual, q0, contacts, halfspaces = _stacked_bodies(paths, mu, halfspaces, base_dir, cmodel)
@@ -305,7 +310,11 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
                                     cmodel if wall["model"] is None else wall["model"]))
 
     geometry, pairs = None, []
-    if cfg["collision"]["pairs"] is not None:
+    if pile_geometry is not None:
+        if cfg["collision"]["pairs"] is not None or cfg["collision"]["boxes"]:
+            raise SceneError("collision: a pile makes its own pairs (every two bodies); it takes no [collision]")
+        geometry, pairs = pile_geometry, pile_pairs
+    elif cfg["collision"]["pairs"] is not None:
         geometry, pairs = _collision_pairs(cfg, model, mu, urdf_path)
     elif cfg["collision"]["boxes"] or cfg["collision"]["mu"] is not None:
         raise SceneError("collision: boxes or mu without pairs do nothing; list the pairs")
@@ -452,6 +461,7 @@ def _collision_pairs(cfg: dict, model: pin.Model, mu: float, urdf_path: Path | N
         gp.name, gp.pair = f"{a}|{b}", len(geometry.collisionPairs) - 1
         gp.mu, gp.max_contacts = mu if col["mu"] is None else col["mu"], col["max_contacts"]
         gp.model = getattr(_core.ContactModel, col["model"])
+        gp.patch = col["patch"]
         pairs.append(gp)
     return geometry, pairs
 
@@ -535,24 +545,34 @@ def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = 
                  slope_deg=slope_deg, mu=mu, geometry=geometry, pairs=pair_list)
 
 
-def _load_box(path: str, base_dir, label: str):
-    """A box URDF as a free body: (model, visual model, half extents)."""
+def _load_box(path: str, base_dir, label: str, balls: bool = False):
+    """A box URDF (balls: or a ball URDF) as a free body: (model, visual model, half extents of the
+    box, or the ball's radius as a float)."""
+    import coal
+
     urdf = _resolve(path, base_dir)
     body = load_urdf(urdf, True, _package_dirs(urdf), name="body")
     half = _box_half_extents(body.visual_model)
-    if half is None:
-        raise SceneError(f"{label} = {path!r}: the bodies must be boxes (a URDF with a box visual)")
-    return body.model, body.visual_model, half
+    if half is not None:
+        return body.model, body.visual_model, half
+    if balls:
+        for go in body.visual_model.geometryObjects:
+            if isinstance(go.geometry, coal.Sphere):
+                return body.model, body.visual_model, float(go.geometry.radius)
+        raise SceneError(f"{label} = {path!r}: a pile's bodies must be boxes or balls (a URDF with a box or "
+                         "sphere visual)")
+    raise SceneError(f"{label} = {path!r}: the bodies must be boxes (a URDF with a box visual)")
 
 
-def _append_box(model, visual, path: str, k, base_dir, label: str, cache: dict | None = None):
+def _append_box(model, visual, path: str, k, base_dir, label: str, cache: dict | None = None,
+                balls: bool = False):
     """Box URDF number k appended to (model, visual) as a free body with names suffixed _k; returns
-    the model, visual, the body's frame and its half extents. The URDF is read once per `cache`;
-    its joints, frames and visuals are added to `model` in place (pin.appendModel copies the
-    whole model each time: 3 s for 256 cubes)."""
+    the model, visual, the body's frame and its half extents (balls: or a ball's radius). The URDF
+    is read once per `cache`; its joints, frames and visuals are added to `model` in place
+    (pin.appendModel copies the whole model each time: 3 s for 256 cubes)."""
     cache = {} if cache is None else cache
     if path not in cache:
-        cache[path] = _load_box(path, base_dir, label)
+        cache[path] = _load_box(path, base_dir, label, balls)
     body, body_visual, half = cache[path]
     joints = {0: 0}
     for j in range(1, body.njoints):
@@ -622,3 +642,75 @@ def _stacked_bodies(paths: list[str], mu: float, halfspaces: list, base_dir=None
         z += half[2]
         below_frame, below_half = body_frame, half
     return model, visual, np.concatenate(q_parts), contacts, halfspaces
+
+
+PILE_MAX_BODIES = 256  # the broad phase tests every pair of bodies (count^2 / 2 bounding-sphere checks)
+
+
+def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly random unit quaternion (x, y, z, w): a normalised Gaussian 4-vector."""
+    q = rng.normal(size=4)
+    return q / np.linalg.norm(q)
+
+
+def _pile_bodies(paths: list[str], count: int, spacing: float | None, seed: int, mu: float, base_dir=None,
+                 cmodel: str = "spatial"):
+    """`count` boxes and balls drawn from `paths` with the random `seed`, at random orientations
+    on a jittered lattice of ceil(count^(1/3)) bodies a side above the ground, no two overlapping:
+    they fall into a pile. Each box's eight corners and each ball touch the ground as point and
+    sphere contacts (analytic); every pair of bodies is a coal pair with contact patches (four
+    points for faces, one with a ball), checked by coal only when their bounding spheres come
+    within the activation distance. Returns model, visual, q0, contacts, geometry, pairs."""
+    import coal
+
+    if count > PILE_MAX_BODIES:
+        raise SceneError(f"array.count = {count}: a pile holds at most {PILE_MAX_BODIES} bodies (its broad phase "
+                         "checks every pair)")
+    if cmodel == "planar":
+        raise SceneError("contacts.model = \"planar\": a pile is three-dimensional (spatial or frictionless)")
+    rng = np.random.default_rng(seed)
+    model, visual, geometry = pin.Model(), pin.GeometryModel(), pin.GeometryModel()
+    cache: dict = {}
+    for k, path in enumerate(paths):  # every kind read (and checked) once, whether drawn or not
+        cache[path] = _load_box(path, base_dir, f"array.urdfs[{k}]", balls=True)
+    shapes = {p: cache[p][2] for p in paths}
+    radius = {p: float(np.linalg.norm(h)) if isinstance(h, np.ndarray) else h for p, h in shapes.items()}
+    largest = max(radius.values())
+    step = spacing if spacing is not None else 2.4 * largest
+    if step <= 2.0 * largest:
+        raise SceneError(f"array.spacing = {step:g}: bodies on the lattice could overlap (the largest body's "
+                         f"bounding diameter is {2 * largest:g} m)")
+    side = math.ceil(count ** (1.0 / 3.0) - 1e-9)
+    jitter = 0.45 * (step - 2.0 * largest)  # each centre moves at most this far along each axis
+    kinds = [paths[int(i)] for i in rng.integers(len(paths), size=count)]
+    contacts, q_parts, frames = [], [], []
+    for k, path in enumerate(kinds):
+        model, visual, frame, shape = _append_box(model, visual, path, k, base_dir, "array.urdfs", cache)
+        frames.append(frame)
+        layer, rest = divmod(k, side * side)
+        i, j = divmod(rest, side)
+        centre = np.array([(j - (side - 1) / 2) * step, (i - (side - 1) / 2) * step,
+                           largest + 0.5 * step + layer * step]) + rng.uniform(-jitter, jitter, size=3)
+        q_parts.append(np.concatenate([centre, _random_rotation(rng)]))
+        joint = model.frames[frame].parentJoint
+        if isinstance(shape, np.ndarray):
+            for c, corner in enumerate(_corners(shape)):
+                contacts.append(_sphere(f"body{k}-corner{c}", frame, corner, 0.0, 0, mu, cmodel))
+            collision = coal.Box(*(2.0 * shape))
+        else:
+            contacts.append(_sphere(f"body{k}-ball", frame, (0, 0, 0), shape, 0, mu, cmodel))
+            collision = coal.Sphere(shape)
+        geometry.addGeometryObject(pin.GeometryObject(f"body{k}", joint, frame, model.frames[frame].placement,
+                                                      collision))
+    pairs = []
+    for a in range(count):
+        for b in range(a + 1, count):
+            geometry.addCollisionPair(pin.CollisionPair(a, b))
+            gp = _core.GeometryPairContact()
+            gp.name, gp.pair, gp.mu = f"body{a}|body{b}", len(geometry.collisionPairs) - 1, mu
+            both_boxes = isinstance(shapes[kinds[a]], np.ndarray) and isinstance(shapes[kinds[b]], np.ndarray)
+            gp.max_contacts = 4 if both_boxes else 1
+            gp.model = getattr(_core.ContactModel, cmodel)
+            gp.patch = True
+            pairs.append(gp)
+    return model, visual, np.concatenate(q_parts), contacts, geometry, pairs

@@ -152,17 +152,26 @@ COLLISION = Table("collision", "General shapes through coal: pairs among the URD
     Key("max_contacts", "int", "contact points per pair", 4, low=1, high=64),
     Key("model", "str", "contact model of the pairs: spatial (3 rows) or frictionless (1 row); mu = 0: 1 row",
         "spatial", choices=("spatial", "frictionless")),
+    Key("patch", "bool", "coal's contact patches: a face on a face touches at up to max_contacts vertices of their "
+        "overlap (a box rests flat); false: coal's deepest point(s) only. Convex shapes and half-spaces only, not "
+        "meshes", False),
 ), tables=(BOXES,))
 
-ARRAY = Table("array", "An array of identical free-flying boxes (instead of `robot`, `urdf` or `bodies`): a grid "
-              "side by side on the ground, or a tower; each box's four bottom corners touch the ground or the box "
-              "below", (
-    Key("urdf", "str", "a box URDF (relative: to the scene file's folder, then the bundled robots)", "cube.urdf"),
-    Key("layout", "str", "grid: side by side on the ground (rows of ceil(sqrt(count))); tower: stacked",
-        required=True, choices=("grid", "tower")),
-    Key("count", "int", "number of boxes", required=True, low=1, high=4096),
-    Key("spacing", "float", "grid: centre-to-centre distance in m (default: twice the box's width)",
-        low=0.0, low_open=True),
+ARRAY = Table("array", "An array of free bodies (instead of `robot`, `urdf` or `bodies`): a grid of boxes side by "
+              "side on the ground or a tower of boxes (each box's four bottom corners touch the ground or the box "
+              "below), or a random pile of boxes and balls dropped from a seed (their corners and spheres touch the "
+              "ground; body against body through coal's contact patches, only for pairs whose bounding spheres come "
+              "within the activation distance)", (
+    Key("urdf", "str", "grid, tower: a box URDF (relative: to the scene file's folder, then the bundled robots)",
+        "cube.urdf"),
+    Key("layout", "str", "grid: side by side on the ground (rows of ceil(sqrt(count))); tower: stacked; pile: "
+        "dropped at random from a seed", required=True, choices=("grid", "tower", "pile")),
+    Key("count", "int", "number of bodies", required=True, low=1, high=4096),
+    Key("spacing", "float", "grid: centre-to-centre distance in m (default: twice the box's width); pile: of the "
+        "drop lattice (default: 1.2 times the largest bounding diameter)", low=0.0, low_open=True),
+    Key("urdfs", "strings", "pile: the box and ball URDFs each body is drawn from (a box or sphere visual)",
+        ("cube.urdf", "ball.urdf"), nonempty=True),
+    Key("seed", "int", "pile: the random seed of the bodies' kinds, positions and orientations", 0, low=0),
 ))
 
 SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `bodies` or `[array]`, the ground, contacts, control, "
@@ -316,8 +325,15 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
                              (f", got {', '.join(given)}" if given else ""))
         if "array" not in cfg:
             out["array"] = None
-        elif out["array"]["layout"] == "tower" and out["array"]["spacing"] is not None:
-            raise SceneError("array.spacing applies to layout = \"grid\" only")
+        else:
+            layout = out["array"]["layout"]
+            if layout == "tower" and out["array"]["spacing"] is not None:
+                raise SceneError("array.spacing applies to layout = \"grid\" or \"pile\" only")
+            for key in ("urdfs", "seed"):
+                if layout != "pile" and key in cfg["array"]:
+                    raise SceneError(f"array.{key} applies to layout = \"pile\" only")
+            if layout == "pile" and "urdf" in cfg["array"]:
+                raise SceneError("array.urdf: a pile draws its bodies from `urdfs`")
         if out["objects"] and out["robot"] is None and out["urdf"] is None:
             raise SceneError("objects: free boxes are added to `robot` or `urdf` scenes (`bodies` and [array] scenes "
                              "are boxes already)")

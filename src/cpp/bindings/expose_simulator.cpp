@@ -104,6 +104,8 @@ Eigen::VectorXd get_nle(const SimulatorData& d) { return d.nle; }
 Eigen::MatrixXd get_candidate_lambda(const SimulatorData& d) { return d.candidate_lambda; }
 Eigen::MatrixXd get_anchor_lambda(const SimulatorData& d) { return d.anchor_lambda; }
 Eigen::MatrixXd get_candidate_velocity(const SimulatorData& d) { return d.candidate_velocity; }
+Eigen::MatrixXd get_pair_points(const SimulatorData& d) { return d.slot_point; }
+Eigen::MatrixXd get_pair_normals(const SimulatorData& d) { return d.slot_normal; }
 SolverResult get_result(const SimulatorData& d) { return d.result; }
 Eigen::VectorXi get_candidate_rows(const SimulatorData& d) {
   return Eigen::Map<const Eigen::VectorXi>(d.candidate_rows.data(), static_cast<Eigen::Index>(d.candidate_rows.size()));
@@ -266,6 +268,9 @@ void exposeSimulator() {
     checkedMember(c, "mu", &GeometryPairContact::mu);
     checkedMember(c, "max_contacts", &GeometryPairContact::max_contacts);
     checkedMember(c, "model", &GeometryPairContact::model, "ContactModel: spatial or frictionless; mu = 0: 1 row");
+    checkedMember(c, "patch", &GeometryPairContact::patch,
+                  "true: coal's contact patch (a manifold for flat faces, up to max_contacts vertices); "
+                  "false: coal's contact points");
   }
   {
     bp::class_<PointAnchor> c("PointAnchor", "A frame point held at a world point: 3 bilateral rows.");
@@ -359,6 +364,12 @@ void exposeSimulator() {
       .add_property("candidate_lambda", &get_candidate_lambda)
       .add_property("anchor_lambda", &get_anchor_lambda)
       .add_property("contact_velocity", &get_candidate_velocity, "3 x candidates: J v after the step")
+      .add_property("pair_points", &get_pair_points,
+                    "3 x candidates: the world point of each coal pair slot at the last detection (sphere "
+                    "contacts: 0)")
+      .add_property("pair_normals", &get_pair_normals,
+                    "3 x candidates: the normal of each coal pair slot, from the pair's first geometry to its "
+                    "second (sphere contacts: 0)")
       .add_property("states", &get_states)
       .add_property("rows", &get_candidate_rows, "per candidate: rows in the last problem (0: inactive)")
       .add_property("result", &get_result)

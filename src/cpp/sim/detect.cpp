@@ -1,5 +1,7 @@
 // Stage 2, detection: which candidates touch, how deep, and with how many rows.
 // Spheres (or points) against half-spaces analytically; general shapes through coal.
+#include <array>
+#include <cmath>
 #include <limits>
 
 #include <pinocchio/algorithm/geometry.hpp>
@@ -17,6 +19,34 @@ void tangentsOf(const Eigen::Vector3d& n, Eigen::Vector3d& t1, Eigen::Vector3d& 
   const Eigen::Vector3d e = std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
   t1 = (e - n * n.dot(e)).normalized();
   t2 = n.cross(t1);
+}
+
+// Up to `wanted` of the patch's vertices, spread out: the farthest from the centroid first,
+// then each time the vertex farthest from those chosen (a square's corners out of an octagon).
+int spreadVertices(const coal::ContactPatch& patch, int wanted, std::array<int, 64>& chosen) {
+  const int size = std::min<int>(static_cast<int>(patch.size()), 64);
+  if (size <= wanted) {
+    for (int k = 0; k < size; ++k) chosen[k] = k;
+    return size;
+  }
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (int k = 0; k < size; ++k) centroid += patch.getPoint(static_cast<size_t>(k));
+  centroid /= size;
+  std::array<double, 64> nearest;  // distance of each vertex to the nearest chosen one
+  int first = 0;
+  for (int k = 1; k < size; ++k)
+    if ((patch.getPoint(k) - centroid).squaredNorm() > (patch.getPoint(first) - centroid).squaredNorm()) first = k;
+  chosen[0] = first;
+  for (int k = 0; k < size; ++k) nearest[k] = (patch.getPoint(k) - patch.getPoint(first)).squaredNorm();
+  for (int c = 1; c < wanted; ++c) {
+    int next = 0;
+    for (int k = 1; k < size; ++k)
+      if (nearest[k] > nearest[next]) next = k;
+    chosen[c] = next;
+    for (int k = 0; k < size; ++k)
+      nearest[k] = std::min(nearest[k], (patch.getPoint(k) - patch.getPoint(next)).squaredNorm());
+  }
+  return wanted;
 }
 
 }  // namespace
@@ -66,21 +96,47 @@ void detectContacts(const SimulatorModel& sim, SimulatorData& sd) {
     sd.geometry_data.oMg[g] = jointPlacement(sim, sd, object.parentJoint) * object.placement;
   }
   int slot = static_cast<int>(sim.contacts.size());
+  std::array<int, 64> chosen;
   for (const GeometryPairContact& g : sim.pairs) {
+    const pinocchio::CollisionPair& cp = sim.geometry.collisionPairs[g.pair];
     coal::CollisionResult& res = sd.geometry_data.collisionResults[g.pair];
     res.clear();
-    pinocchio::computeCollision(sim.geometry, sd.geometry_data, g.pair);
-    const int found = std::min<int>(static_cast<int>(res.numContacts()), g.max_contacts);
+    // broad phase: bounding spheres farther apart than the activation distance cannot touch
+    const double reach = sim.geometry_radius[cp.first] + sim.geometry_radius[cp.second] +
+                         sim.settings.activation_distance;
+    int found = 0;
+    if (!std::isfinite(reach) ||
+        (sd.geometry_data.oMg[cp.first].act(sim.geometry_center[cp.first]) -
+         sd.geometry_data.oMg[cp.second].act(sim.geometry_center[cp.second])).norm() <= reach) {
+      pinocchio::computeCollision(sim.geometry, sd.geometry_data, g.pair);
+      found = std::min<int>(static_cast<int>(res.numContacts()), g.max_contacts);
+    }
+    const coal::ContactPatch* patch = nullptr;
+    if (g.patch && found > 0) {
+      pinocchio::computeContactPatch(sim.geometry, sd.geometry_data, g.pair);
+      const coal::ContactPatchResult& patches = sd.geometry_data.contactPatchResults[g.pair];
+      if (patches.numContactPatches() > 0 && patches.getContactPatch(0).size() > 0) {
+        patch = &patches.getContactPatch(0);
+        found = spreadVertices(*patch, g.max_contacts, chosen);
+      }
+    }
     for (int k = 0; k < g.max_contacts; ++k, ++slot) {
       if (k >= found) {
         sd.gaps[slot] = std::numeric_limits<double>::infinity();
         continue;
       }
-      const coal::Contact& c = res.getContact(static_cast<size_t>(k));
-      sd.gaps[slot] = c.penetration_depth;  // signed distance (coal 3: < 0 overlapping)
-      const Eigen::Vector3d n = c.normal.normalized();  // from the pair's first geometry to its second
+      Eigen::Vector3d n;
+      if (patch != nullptr) {  // one normal and depth for the patch (coal 3: signed, < 0 overlapping)
+        sd.gaps[slot] = patch->penetration_depth;
+        n = patch->getNormal().normalized();
+        sd.slot_point.col(slot) = patch->getPoint(static_cast<size_t>(chosen[k]));
+      } else {
+        const coal::Contact& c = res.getContact(static_cast<size_t>(k));
+        sd.gaps[slot] = c.penetration_depth;  // signed distance (coal 3: < 0 overlapping)
+        n = c.normal.normalized();  // from the pair's first geometry to its second
+        sd.slot_point.col(slot) = c.pos;
+      }
       sd.slot_normal.col(slot) = n;
-      sd.slot_point.col(slot) = c.pos;
       Eigen::Vector3d t1, t2;
       tangentsOf(n, t1, t2);
       sd.slot_t1.col(slot) = t1;

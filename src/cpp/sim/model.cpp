@@ -3,6 +3,7 @@
 // sized once for it.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -152,9 +153,25 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
     if (g.model == ContactModel::kPlanar)
       throw std::invalid_argument("pair '" + g.name + "': the planar contact model applies to sphere contacts only "
                                   "(a coal pair is spatial or frictionless)");
+    if (g.patch)
+      for (pinocchio::GeomIndex gi : {geometry.collisionPairs[g.pair].first, geometry.collisionPairs[g.pair].second})
+        if (geometry.geometryObjects[gi].geometry->getObjectType() == coal::OT_BVH)
+          throw std::invalid_argument("pair '" + g.name + "': contact patches need convex shapes or half-spaces; '" +
+                                      geometry.geometryObjects[gi].name + "' is a mesh (set patch = false)");
     for (int k = 0; k < g.max_contacts; ++k) slot_pair.push_back(static_cast<int>(p));
   }
   num_candidates = static_cast<int>(slot_pair.size());
+  for (const pinocchio::GeometryObject& object : geometry.geometryObjects) {
+    const coal::NODE_TYPE type = object.geometry->getNodeType();
+    if (type == coal::GEOM_HALFSPACE || type == coal::GEOM_PLANE) {
+      geometry_center.push_back(Eigen::Vector3d::Zero());
+      geometry_radius.push_back(std::numeric_limits<double>::infinity());
+      continue;
+    }
+    object.geometry->computeLocalAABB();
+    geometry_center.push_back(object.placement.act(Eigen::Vector3d(object.geometry->aabb_center)));
+    geometry_radius.push_back(object.geometry->aabb_radius);
+  }
 }
 
 SystemWork::SystemWork(const SystemModel& s)

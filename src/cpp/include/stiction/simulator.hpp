@@ -75,6 +75,10 @@ struct GeometryPairContact {
   double mu = 0.5;
   int max_contacts = 4;
   ContactModel model = ContactModel::kSpatial;  ///< spatial or frictionless (planar: spheres only)
+  /// Flat faces need a manifold, not coal's one deepest point (a box on a box would rock on
+  /// it): with `patch`, the points are coal's contact patch (the overlap polygon of the two
+  /// support sets, computeContactPatch), reduced to the max_contacts most spread vertices.
+  bool patch = false;
 };
 
 /// A point of frame `frame` (at `offset`) held at the world point `target`, or
@@ -157,6 +161,11 @@ class SimulatorModel {
   int numCandidates() const { return num_candidates; }
   int num_candidates = 0;
   std::vector<int> slot_pair;  ///< per candidate: -1 for a sphere contact, else its pair
+  /// Broad phase: each geometry's bounding sphere (centre in its joint's frame, radius; a
+  /// half-space or plane: infinite), so a pair farther apart than the activation distance
+  /// skips coal.
+  std::vector<Eigen::Vector3d> geometry_center;
+  std::vector<double> geometry_radius;
 };
 
 /// Microseconds spent per phase in the last step (summed over RHS evaluations in ODE modes).
