@@ -139,23 +139,60 @@ def test_admm_on_a_sparse_operator_solves_as_the_dense_solvers_do(rng, asymmetry
     np.testing.assert_allclose(admm.lam, newton.lam, atol=1e-7 * np.abs(newton.lam).max())
 
 
-def test_a_warm_started_robot_step_is_one_newton_stage():
-    """The simulator's per-step problem (a few contacts, warm-started from the previous step):
-    the small-problem path, untouched by the rule for larger problems."""
+def test_a_warm_start_that_solves_the_problem_costs_no_solve():
+    """The simulator's per-step problem at rest (A and b unchanged, warm-started from the previous
+    step's forces): the guess is checked and kept, no factorization."""
     from stiction.problems import cube_on_ground
 
     problem = cube_on_ground(mu=0.3).problem
     first = stiction.solve(problem)
     again = stiction.solve(problem, warm_start=first.lam)
-    assert again.converged and stage_names(again) == ["newton"] and again.iterations <= 1
-    np.testing.assert_allclose(again.lam, first.lam, atol=1e-12 * np.abs(first.lam).max())
+    assert again.converged and stage_names(again) == ["sticking step"] and again.iterations == 0
+    np.testing.assert_array_equal(again.lam, first.lam)
 
 
-def test_a_warm_started_medium_step_goes_from_a_stalled_gauss_seidel_to_admm():
+def test_the_sticking_step_keeps_the_guess_share_of_non_unique_forces():
+    """A cube on its 4 corners: 12 rows, A of rank 6, so the forces that hold it are not unique.
+    Warm-started strictly inside the cones, the default solves the all-stick system by one proximal
+    factorization: the answer satisfies the law (A lambda = b, inside the cones) and differs from
+    the guess only within A's range (to rounding: the shifted factor's condition is ~1e10), so the
+    guess's share of the null space (how the weight is spread over the corners) is kept."""
+    from stiction.problems import cube_on_ground
+
+    problem = cube_on_ground(mu=0.3).problem
+    A, b = np.asarray(problem.A), np.asarray(problem.b)
+    w, V = np.linalg.eigh(A)
+    null = V[:, w < 1e-9 * w.max()]
+    assert null.shape[1] == 6
+    first = stiction.solve(problem)
+    # corners 0 and 3 carry 20 % more than 1 and 2: a null-space share, still inside the cones
+    diagonal = np.zeros(12)
+    diagonal[2::3] = [1.0, -1.0, -1.0, 1.0]
+    share = null @ (null.T @ diagonal)
+    guess = first.lam + 0.2 * first.lam[2] * share / np.abs(share).max()
+    moved = stiction.spatial_problem(A, 1.01 * b, 0.3)  # the next step: b moved
+    r = stiction.solve(moved, warm_start=guess)
+    assert r.converged and stage_names(r) == ["sticking step"] and r.iterations <= 2
+    np.testing.assert_allclose(A @ r.lam, 1.01 * b, atol=1e-10 * np.abs(b).max())
+    kept = null.T @ (r.lam - guess)
+    assert np.abs(kept).max() <= 1e-5 * np.abs(null.T @ (guess - first.lam)).max()
+
+
+def test_a_sliding_guess_skips_the_sticking_step():
+    """A guess on the cone's boundary (a sliding contact) is not tried as all-stick: Newton runs."""
+    from stiction.problems import cube_on_ground
+
+    problem = cube_on_ground(mu=0.3).problem
+    lam = np.tile([0.3, 0.0, 1.0], 4)  # ||lambda_t|| = mu lambda_n: on the boundary
+    r = stiction.solve(problem, warm_start=lam)
+    assert r.converged and stage_names(r)[0] == "newton"
+
+
+def test_a_warm_started_tower_step_is_the_sticking_step():
     """A tower of 20 cubes on 4 corners each (240 rows, A of rank <= 120, warm-started by the
     simulator): Newton stalled there from the NSGS iterate and from the guess (no descent
-    direction); ADMM from the previous step's forces converges. Cold solves of the same size keep
-    NSGS then Newton (test_medium_problems_hand_a_stalled_gauss_seidel_to_newton)."""
+    direction), and ADMM took ~2.7 ms; every contact sticks, so the proximal all-stick
+    factorization (A is block-tridiagonal: factored sparsely) solves each step."""
     from stiction.scene import load_scene
     from stiction.simulator import Simulator
 
@@ -164,8 +201,11 @@ def test_a_warm_started_medium_step_goes_from_a_stalled_gauss_seidel_to_admm():
     r = sim.data.result
     assert traj.converged[1:].all()
     assert r.converged and 64 < len(r.lam) <= 384
-    names = stage_names(r)
-    assert names[-1] == "admm" and "newton" not in names, r.stages
+    assert stage_names(r) == ["sticking step"] and r.iterations <= kStickSolves(), r.stages
+
+
+def kStickSolves():
+    return 4  # DefaultSolver::kStickSolves
 
 
 def test_a_warm_start_that_stalls_is_retried_from_zero():

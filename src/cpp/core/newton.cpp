@@ -1,5 +1,6 @@
 #include "stiction/newton.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -39,6 +40,29 @@ Eigen::Matrix<double, K, K> coneProjectionJacobian(const Eigen::Matrix<double, K
   J.template bottomLeftCorner<1, K - 1>() = mu / d * e.transpose();
   J(K - 1, K - 1) = 1.0 / d;
   return J;
+}
+
+// Every block strictly inside its cone: a unilateral row pushing, a friction block's tangential
+// force below mu times a positive normal force (bilateral rows: any value).
+bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& lam) {
+  const auto& cons = problem.constraints();
+  const auto& off = problem.offsets();
+  for (std::size_t i = 0; i < cons.size(); ++i) {
+    const Eigen::Index o = off[i];
+    switch (cons[i].kind) {
+      case ConstraintKind::kBilateral: break;
+      case ConstraintKind::kUnilateral:
+        if (!(lam[o] > 0.0)) return false;
+        break;
+      case ConstraintKind::kPlanarFriction:
+        if (!(std::abs(lam[o]) < cons[i].mu * lam[o + 1])) return false;
+        break;
+      case ConstraintKind::kSpatialFriction:
+        if (!(norm2(lam[o], lam[o + 1]) < cons[i].mu * lam[o + 2])) return false;
+        break;
+    }
+  }
+  return true;
 }
 
 }  // namespace
@@ -195,6 +219,106 @@ void NewtonSolver::iterate(const ContactProblem& problem, const SolverSettings& 
                           settings.time_limit, result.message);
 }
 
+bool DefaultSolver::factorShifted(const ContactProblem& problem, double shift) {
+  const Eigen::Index m = problem.numRows();
+  const Eigen::SparseMatrix<double>* S = problem.delassus().sparse();
+  if (S == nullptr && m > kNewtonFirstRows) {
+    const Eigen::MatrixXd& A = problem.delassus().dense();
+    // A's values into the pattern held from the last step when its nonzeros fit in it: entries
+    // that are exactly zero in one step and not in the next (a tower standing straight) would
+    // otherwise change the pattern and repeat the ordering every step.
+    bool fits = stick_from_dense_ && stick_sparse_.rows() == m;
+    for (Eigen::Index j = 0; fits && j < m; ++j) {
+      Eigen::Index placed = 0;
+      for (Eigen::SparseMatrix<double>::InnerIterator it(stick_sparse_, j); it; ++it) {
+        it.valueRef() = A(it.row(), j);
+        placed += it.value() != 0.0;
+      }
+      fits = placed == (A.col(j).array() != 0.0).count();
+    }
+    if (fits) {
+      S = &stick_sparse_;
+    } else if (double((A.array() != 0.0).count()) <= kStickSparseDensity * double(m) * double(m)) {
+      stick_sparse_ = A.sparseView();
+      stick_sparse_.makeCompressed();
+      S = &stick_sparse_;
+    }
+    stick_from_dense_ = S != nullptr;
+  }
+  stick_sparse_path_ = S != nullptr;
+  if (stick_sparse_path_) {
+    // The ordering (AMD) and symbolic factor are kept while A's pattern stays (the same contacts
+    // from step to step).
+    const auto nnz = static_cast<std::size_t>(S->nonZeros());
+    const bool same = S->isCompressed() && stick_outer_.size() == static_cast<std::size_t>(m + 1) &&
+                      stick_inner_.size() == nnz &&
+                      std::equal(stick_outer_.begin(), stick_outer_.end(), S->outerIndexPtr()) &&
+                      std::equal(stick_inner_.begin(), stick_inner_.end(), S->innerIndexPtr());
+    if (!same) {
+      if (!S->isCompressed()) return false;
+      stick_sparse_llt_.analyzePattern(*S);
+      stick_natural_llt_.analyzePattern(*S);
+      // the symbolic analysis sizes L exactly: compare the fills
+      stick_natural_ = stick_natural_llt_.matrixL().nestedExpression().nonZeros() <=
+                       stick_sparse_llt_.matrixL().nestedExpression().nonZeros() * 11 / 10;
+      stick_outer_.assign(S->outerIndexPtr(), S->outerIndexPtr() + m + 1);
+      stick_inner_.assign(S->innerIndexPtr(), S->innerIndexPtr() + nnz);
+    }
+    if (stick_natural_) {
+      stick_natural_llt_.setShift(shift);
+      stick_natural_llt_.factorize(*S);
+      return stick_natural_llt_.info() == Eigen::Success;
+    }
+    stick_sparse_llt_.setShift(shift);
+    stick_sparse_llt_.factorize(*S);
+    return stick_sparse_llt_.info() == Eigen::Success;
+  }
+  stick_shifted_ = problem.delassus().dense();
+  stick_shifted_.diagonal().array() += shift;
+  stick_llt_.compute(stick_shifted_);
+  return stick_llt_.info() == Eigen::Success;
+}
+
+bool DefaultSolver::stickingStep(const ContactProblem& problem, Eigen::VectorXd& lam, double tolerance, int& solves) {
+  solves = 0;
+  const DelassusOperator& A = problem.delassus();
+  StoppingTest test(problem, tolerance);
+  stick_x_ = lam;
+  stick_u_.resize(lam.size());
+  A.multiply(stick_x_, stick_u_);
+  stick_u_ -= problem.b();
+  double natural_map = naturalMapNorm(problem, stick_x_, stick_u_);
+  // the guess may be the answer already (a scene at rest whose A and b did not change)
+  StoppingTest::Outcome outcome = test.check(stick_x_, stick_u_, natural_map);
+  if (outcome == StoppingTest::kConverged) return true;
+  const double scale = A.diagonal().cwiseAbs().maxCoeff();
+  if (!(scale > 0.0) || !std::isfinite(scale) || !factorShifted(problem, kStickShift * scale)) return false;
+  while (solves < kStickSolves) {
+    // (A + rho I) d = -(A x - b): a proximal point step on the linear all-stick system
+    const double previous = natural_map;
+    if (!stick_sparse_path_)
+      stick_d_ = stick_llt_.solve(stick_u_);
+    else if (stick_natural_)
+      stick_d_ = stick_natural_llt_.solve(stick_u_);
+    else
+      stick_d_ = stick_sparse_llt_.solve(stick_u_);
+    ++solves;
+    stick_x_ -= stick_d_;
+    A.multiply(stick_x_, stick_u_);
+    stick_u_ -= problem.b();
+    natural_map = naturalMapNorm(problem, stick_x_, stick_u_);
+    outcome = test.check(stick_x_, stick_u_, natural_map);
+    if (outcome == StoppingTest::kConverged) {
+      lam = stick_x_;
+      return true;
+    }
+    // a contact that should open or slip: the all-stick point leaves the cones and the natural
+    // map stops falling
+    if (outcome == StoppingTest::kUnresolvable || !(natural_map < 0.5 * previous)) return false;
+  }
+  return false;
+}
+
 void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings& settings,
                             SolverResult& result) {
   using Clock = std::chrono::steady_clock;
@@ -266,6 +390,15 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
   auto unresolvable = [&](const std::string& stage_msg) { return stage_msg == kUnresolvableMessage; };
   bool admm_started = false, use_admm = false;
   Eigen::VectorXd admm_state;
+  // 0. A guess with every contact closed and sticking: the all-stick solution, if it is one.
+  if (budget > 0 && problem.numRows() > 0 && strictlyInsideCones(problem, lam)) {
+    const auto t0 = Clock::now();
+    int solves = 0;
+    const bool done = stickingStep(problem, lam, tol, solves);
+    used += solves;
+    record("sticking step", solves, t0, done ? "converged" : "not all sticking");
+    if (done) return finish("converged (sticking step)");
+  }
   if (problem.numRows() <= kNewtonFirstRows) {
     // 1a. Small problems (a robot's feet, a box's corners): a dense Newton step
     //     costs less than a few Gauss-Seidel sweeps and converges in a handful.

@@ -1,5 +1,7 @@
 // Stage 4, the Delassus stage: the mass matrix and its factor, the free acceleration,
 // then the contact problem's A = J M^-1 J^T (eq. 22) and b (eq. 27).
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -77,6 +79,24 @@ void factorMass(const SystemModel& part, SystemWork& w, const JointControl& cont
     throw std::runtime_error("the mass matrix of '" + model.name + "' is not positive definite at this configuration");
 }
 
+// The coordinates J's rows can move: its nonzero columns and all their ancestors (Pinocchio's
+// parents_fromRow: the previous coordinate on the path to the root). M^-1 J^T vanishes
+// outside them, and U^-1 restricted to them is exact: U(i, j) != 0 only for j in i's subtree,
+// and no descendant of a coordinate outside the set is inside it. True when they are few
+// enough (under 3/4 of the part's) for the restricted products to pay.
+bool contactSupport(const pinocchio::Data& data, SystemWork& w) {
+  const Eigen::Index nv = w.J.cols();
+  w.in_support.assign(static_cast<std::size_t>(nv), 0);
+  for (Eigen::Index k = nv - 1; k >= 0; --k) {
+    if (w.in_support[k] || !(w.J.col(k).array() != 0.0).any()) continue;
+    for (int j = static_cast<int>(k); j >= 0 && !w.in_support[j]; j = data.parents_fromRow[j]) w.in_support[j] = 1;
+  }
+  w.support.clear();
+  for (Eigen::Index k = 0; k < nv; ++k)
+    if (w.in_support[k]) w.support.push_back(static_cast<int>(k));
+  return 4 * w.support.size() < 3 * static_cast<std::size_t>(nv);
+}
+
 }  // namespace
 
 void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
@@ -113,6 +133,26 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     const auto n = static_cast<Eigen::Index>(w.rows.size());
     w.A.resize(n, n);
     if (n == 0) continue;
+    if (w.J.cols() > 6 && contactSupport(w.data, w)) {
+      // A robot touching with a few limbs (TALOS's two soles: base and legs, 18 of 38
+      // coordinates): the triangular solve and the rank update on those coordinates only.
+      const auto s = static_cast<Eigen::Index>(w.support.size());
+      w.U_support.resize(s, s);
+      w.W.resize(s, n);
+      for (Eigen::Index c = 0; c < s; ++c) {
+        for (Eigen::Index r = 0; r < c; ++r) w.U_support(r, c) = w.data.U(w.support[r], w.support[c]);
+        w.W.row(c) = w.J.col(w.support[c]).transpose();
+      }
+      w.U_support.triangularView<Eigen::StrictlyLower>().setZero();
+      w.U_support.diagonal().setOnes();
+      w.U_support.triangularView<Eigen::UnitUpper>().solveInPlace(w.W);
+      for (Eigen::Index c = 0; c < s; ++c) w.W.row(c) *= std::sqrt(w.data.Dinv[w.support[c]]);
+      w.A.setZero();
+      w.A.selfadjointView<Eigen::Lower>().rankUpdate(w.W.transpose());
+      w.A.triangularView<Eigen::StrictlyUpper>() = w.A.transpose();
+      entries += n * n;
+      continue;
+    }
     w.W = w.J.transpose();
     if (w.W.rows() <= 6) {
       // a free body's 6 x 6 factor: back substitution by rows (Eigen's blocked triangular
@@ -139,7 +179,7 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
   }
   // Sparse when the parts leave most of A empty: many parts, more rows than the dense
   // solvers handle well (the default rule's threshold), at most 10 % of the entries.
-  sd.sparse = sd.parts.size() > 1 && rows > kSparseDelassusRows && entries * 10 <= rows * rows;
+  sd.sparse = sd.parts.size() > 1 && rows > kSparseDelassusRows && entries * 4 <= rows * rows;
   if (sd.sparse && !sd.parts_share_rows) {
     // Every row in one part: column c of A is its part's column, rows in the part's (ascending)
     // order; written straight into the compressed storage.
@@ -173,14 +213,50 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     return;
   }
   if (sd.sparse) {  // rows shared by two parts (contacts between bodies): their shares summed
+    // While the entries' (row, column) sequence is last step's (the same contacts on the same
+    // rows), their positions in A_sparse are known: the shares are summed in place rather than
+    // sorted again (setFromTriplets was a third of a tower's step).
+    const auto count = static_cast<std::size_t>(entries);
+    bool same = sd.A_sparse.rows() == rows && sd.triplet_position.size() == count && sd.triplet_entry.size() == count;
+    std::size_t k = 0;
+    for (const SystemWork& w : sd.parts)
+      for (Eigen::Index c = 0; same && c < w.A.cols() && !w.rows.empty(); ++c)
+        for (Eigen::Index r = 0; r < w.A.rows(); ++r, ++k)
+          if (sd.triplet_entry[k].first != w.rows[r] || sd.triplet_entry[k].second != w.rows[c]) {
+            same = false;
+            break;
+          }
+    if (same) {
+      double* value = sd.A_sparse.valuePtr();
+      std::fill(value, value + sd.A_sparse.nonZeros(), 0.0);
+      k = 0;
+      for (const SystemWork& w : sd.parts)
+        for (Eigen::Index c = 0; c < w.A.cols() && !w.rows.empty(); ++c)
+          for (Eigen::Index r = 0; r < w.A.rows(); ++r, ++k) value[sd.triplet_position[k]] += w.A(r, c);
+      sd.A.resize(0, 0);
+      return;
+    }
     sd.triplets.clear();
-    sd.triplets.reserve(static_cast<std::size_t>(entries));
+    sd.triplets.reserve(count);
+    sd.triplet_entry.clear();
+    sd.triplet_entry.reserve(count);
     for (const SystemWork& w : sd.parts)
       for (Eigen::Index c = 0; c < w.A.cols() && !w.rows.empty(); ++c)
-        for (Eigen::Index r = 0; r < w.A.rows(); ++r)
+        for (Eigen::Index r = 0; r < w.A.rows(); ++r) {
           sd.triplets.emplace_back(w.rows[r], w.rows[c], w.A(r, c));
+          sd.triplet_entry.emplace_back(w.rows[r], w.rows[c]);
+        }
     sd.A_sparse.resize(rows, rows);
     sd.A_sparse.setFromTriplets(sd.triplets.begin(), sd.triplets.end());
+    sd.A_sparse.makeCompressed();
+    // each entry's position in the compressed storage (a search in its column)
+    sd.triplet_position.resize(count);
+    const int* outer = sd.A_sparse.outerIndexPtr();
+    const int* inner = sd.A_sparse.innerIndexPtr();
+    for (std::size_t t = 0; t < count; ++t) {
+      const int row = sd.triplet_entry[t].first, col = sd.triplet_entry[t].second;
+      sd.triplet_position[t] = static_cast<int>(std::lower_bound(inner + outer[col], inner + outer[col + 1], row) - inner);
+    }
     sd.A.resize(0, 0);
     return;
   }

@@ -9,7 +9,11 @@
 // Converges in a few steps where Gauss-Seidel stalls (large mass ratios).
 #pragma once
 
+#include <vector>
+
+#include <Eigen/Cholesky>
 #include <Eigen/LU>
+#include <Eigen/SparseCholesky>
 
 #include "stiction/admm.hpp"
 #include "stiction/nsgs.hpp"
@@ -40,6 +44,10 @@ class NewtonSolver final : public ContactSolver {
 /// The default: picks its stages by size and sparsity, and within those by how the stages
 /// converge (measured on the 36 FCLib problems and the simulator's scenes: docs/solvers.md,
 /// "The default's rule").
+/// - First, when the initial guess is strictly inside every cone (a warm start where every
+///   contact was closed and sticking: a robot standing, a box at rest, a tower), the all-stick
+///   solution (u = A lambda - b = 0, eq. 65 with every block inside its cone) by one proximal
+///   factorization (stickingStep); kept only if the stopping test passes.
 /// - Small problems (<= kNewtonFirstRows rows: a robot's feet, a box's corners): Newton
 ///   first, then Newton from ProxQP's facetized-cone solution if that failed.
 /// - Large sparse problems (> kAdmmAboveRows rows, <= 10 % nonzero): ADMM (sparse
@@ -70,11 +78,41 @@ class DefaultSolver final : public ContactSolver {
   static constexpr int kPolishSteps = 5;
   static constexpr double kPolishWithin = 1e3;
 
+  /// The sticking step's proximal shift, relative to A's largest diagonal entry, and how many
+  /// refinement solves it takes at most.
+  static constexpr double kStickShift = 1e-10;
+  static constexpr int kStickSolves = 4;
+  /// A dense A with at most this fraction of nonzeros is factored sparsely by the sticking step
+  /// (a tower's A: block-tridiagonal).
+  static constexpr double kStickSparseDensity = 0.25;
+
   std::string name() const override { return "default"; }
   void iterate(const ContactProblem& problem, const SolverSettings& settings,
                SolverResult& result) override;
 
+  /// The all-stick solution near lam: (A + rho I) d = b - A x from x = lam, refined. The
+  /// correction lies in A's range, so where A is rank-deficient (the four corners of a sole:
+  /// 12 rows of rank 6; a tower's interfaces) the forces keep the guess's share of the
+  /// non-unique part instead of drifting within the solution set, and one factorization
+  /// replaces Newton's regularised steps. True (lam replaced) when StoppingTest says converged;
+  /// else lam is unchanged. `solves`: the refinement solves done.
+  bool stickingStep(const ContactProblem& problem, Eigen::VectorXd& lam, double tolerance, int& solves);
+
  private:
+  bool factorShifted(const ContactProblem& problem, double shift);
+
+  Eigen::LLT<Eigen::MatrixXd> stick_llt_;
+  Eigen::MatrixXd stick_shifted_;
+  Eigen::SimplicialLLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::AMDOrdering<int>> stick_sparse_llt_;
+  // Contacts listed body by body (a tower bottom to top) are often ordered well already: the
+  // natural order, when it fills no more than AMD's, saves permuting A at every factorization.
+  Eigen::SimplicialLLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>> stick_natural_llt_;
+  bool stick_natural_ = false;
+  Eigen::SparseMatrix<double> stick_sparse_;              // a dense A's entries, when sparse enough
+  std::vector<int> stick_outer_, stick_inner_;            // the pattern analysed last
+  bool stick_sparse_path_ = false;
+  bool stick_from_dense_ = false;  // stick_sparse_ holds a dense A's pattern
+  Eigen::VectorXd stick_x_, stick_u_, stick_d_;
   NsgsSolver nsgs_;
   NewtonSolver newton_;
   AdmmSolver admm_;

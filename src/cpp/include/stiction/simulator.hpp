@@ -189,6 +189,11 @@ struct SystemWork {
   Eigen::MatrixXd J;      ///< rows x nv of the part: its columns of the contact Jacobian
   Eigen::MatrixXd W;      ///< D^-1/2 U^-1 J^T (M = U D U^T)
   Eigen::MatrixXd A;      ///< W^T W = J M^-1 J^T of this part (eq. 22)
+  /// The coordinates the contacts can move (J's nonzero columns and their ancestors) when they
+  /// are few (a humanoid's two legs and base): W, U and D restricted to them.
+  std::vector<int> support;
+  std::vector<char> in_support;
+  Eigen::MatrixXd U_support;
   Eigen::MatrixXd J6;     ///< 6 x nv: one point's Jacobian
   Eigen::Matrix3Xd Jrel;  ///< 3 x nv: one contact's relative point Jacobian
   std::vector<pinocchio::Force> forces;
@@ -264,6 +269,8 @@ class SimulatorData {
   std::vector<Eigen::VectorXd> stage_v, stage_a;
   std::vector<int> part_fill;  ///< per part: rows placed so far (contactJacobians)
   std::vector<Eigen::Triplet<double>> triplets;  ///< the sparse A's entries, part by part
+  std::vector<std::pair<int, int>> triplet_entry;  ///< their (row, column), as last assembled
+  std::vector<int> triplet_position;  ///< where each sits in A_sparse's compressed storage
   bool parts_share_rows = false;  ///< a contact between two parts: its rows in both
   std::vector<int> row_part, row_local;  ///< per row: its part and local row (rows in one part each)
   Eigen::VectorXd row_scratch;  ///< one value per row
