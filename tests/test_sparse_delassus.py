@@ -80,3 +80,16 @@ def test_an_infeasible_sparse_problem_is_reported_as_such():
     b[2] = 1.0  # pushes the immovable contact closed
     r = stiction.solve(_core.ContactProblem(A, b, cons))
     assert r.status == _core.SolveStatus.infeasible and 0 in list(r.implicated_blocks)
+
+
+def test_the_rounding_bound_of_a_sparse_product_counts_its_row_not_its_size():
+    """The verdict's worst-case rounding bound of u = A lambda - b is gamma_k (|A||lambda| + |b|)
+    with k the terms a row sums: 72 for these 72 rows held dense, 12 held sparse (block diagonal),
+    so the sparse bound is 74/14 = 5.3x tighter at (nearly) the same lambda."""
+    A, b, cons = many_cubes(6)
+    sparse = _core.ContactProblem(A, b, cons)
+    dense = _core.ContactProblem(A.toarray(), b, cons)
+    rd, rs = stiction.solve(dense), stiction.solve(sparse)
+    assert rs.converged and rd.converged
+    np.testing.assert_allclose(rs.lam, rd.lam, rtol=1e-8, atol=1e-12 * np.abs(rd.lam).max())
+    assert rs.residual_bound == pytest.approx(rd.residual_bound * (12 + 2) / (72 + 2), rel=0.05)

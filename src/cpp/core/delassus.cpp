@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <vector>
 
 namespace stiction {
 
@@ -59,6 +60,9 @@ SparseDelassus::SparseDelassus(Matrix A, bool symmetric) : A_(std::move(A)), sym
   abs_ = A_;  // same pattern; |values| in place (cheaper than Eigen's generic A_.cwiseAbs())
   for (Eigen::Index k = 0; k < abs_.nonZeros(); ++k) abs_.valuePtr()[k] = std::abs(abs_.valuePtr()[k]);
   diagonal_ = A_.diagonal();
+  std::vector<Eigen::Index> per_row(static_cast<std::size_t>(A_.rows()), 0);
+  for (Eigen::Index k = 0; k < A_.nonZeros(); ++k) ++per_row[A_.innerIndexPtr()[k]];
+  for (Eigen::Index c : per_row) max_row_entries_ = std::max(max_row_entries_, c);
 }
 
 void SparseDelassus::multiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const {

@@ -169,31 +169,35 @@ void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<cons
   // |A||lambda| (in double, inflated by its own rounding: it is only a bound)
   abs_product.resize(m);
   problem.delassus().absMultiply(lam, abs_product);
-  abs_product *= 1.0 + (static_cast<double>(m) + 2.0) * kEps;
+  // A row of A lambda sums at most `terms` products (a sparse A: its fullest row, not m): the
+  // worst-case rounding bound gamma_terms of every product below.
+  const double terms = static_cast<double>(problem.delassus().maxRowEntries());
+  abs_product *= 1.0 + (terms + 2.0) * kEps;
   out.floor = floorOf(problem, lam, abs_product, per_block ? out.block_floor : block_floor);
-  auto finish = [&](double map, double gamma) {
+  auto finish = [&](double map, double unit) {
     out.natural_map = map;
     double sq = 0.0;
     for (double e : block_bound) sq += e * e;
-    out.bound = std::sqrt(sq) + gamma * map;  // + the norm's own accumulation
+    out.bound = std::sqrt(sq) + (static_cast<double>(m) + 2.0) * unit * map;  // + the norm's own accumulation
   };
   // 1. In double (vectorised; enough for a well-scaled problem): decisive when even
   //    its worst-case bound keeps it on one side of `decisive`.
-  double gamma = (static_cast<double>(m) + 2.0) * kEps;
+  double gamma = (terms + 2.0) * kEps;
   ud.resize(m);
   problem.delassus().multiply(lam, ud);
   ud -= problem.b();
   du = gamma * (abs_product + problem.b().cwiseAbs());
-  finish(evaluate<double>(problem, lam.data(), ud.data(), du.data(), &block_bound), gamma);
+  finish(evaluate<double>(problem, lam.data(), ud.data(), du.data(), &block_bound), kEps);
   if (out.natural_map + out.bound <= decisive || out.natural_map - out.bound > decisive) return;
   // 2. In extended precision: u = A lambda - b and every block, with its (smaller) bound.
   static_assert(std::is_same<Extended, long double>::value, "DelassusOperator::multiplyExtended is long double");
   l = lam.cast<Extended>();
   problem.delassus().multiplyExtended(l, u);
   u -= problem.b().cast<Extended>();
-  gamma = static_cast<double>((static_cast<Extended>(m) + 2) * unitRoundoff<Extended>());
+  gamma = static_cast<double>((static_cast<Extended>(terms) + 2) * unitRoundoff<Extended>());
   du = gamma * (abs_product + problem.b().cwiseAbs());
-  finish(static_cast<double>(evaluate<Extended>(problem, l.data(), u.data(), du.data(), &block_bound)), gamma);
+  finish(static_cast<double>(evaluate<Extended>(problem, l.data(), u.data(), du.data(), &block_bound)),
+         static_cast<double>(unitRoundoff<Extended>()));
 }
 
 // The last verdict measured in this solve: the algorithm's stopping test and the

@@ -56,6 +56,9 @@ class DelassusOperator {
   virtual bool allFinite() const = 0;
   /// The stored entries when A is held sparse (nullptr for a dense A).
   virtual const Eigen::SparseMatrix<double>* sparse() const { return nullptr; }
+  /// The most entries any row of A x sums: the k of the rounding bound gamma_k = k eps of a
+  /// product (verdict.hpp; a dense A: its columns; a sparse one: its fullest row).
+  virtual Eigen::Index maxRowEntries() const { return rows(); }
 };
 
 /// Dense, column-major storage.
@@ -119,6 +122,7 @@ class SparseDelassus final : public DelassusOperator {
   double rowNorm(Eigen::Index i) const override;
   bool allFinite() const override;
   const Matrix* sparse() const override { return &A_; }
+  Eigen::Index maxRowEntries() const override { return max_row_entries_; }
   Eigen::Index nonZeros() const { return A_.nonZeros(); }
   /// Take the values of `A` when it has this operator's pattern (the simulator's A from one step
   /// to the next while the same contacts are active): O(entries), no allocation. Returns false and
@@ -129,6 +133,7 @@ class SparseDelassus final : public DelassusOperator {
   Matrix A_;
   Matrix abs_;  // |A|, for the rounding bound
   Eigen::VectorXd diagonal_;  // computed once (a sparse diagonal is a search per column)
+  Eigen::Index max_row_entries_ = 0;  // the pattern's fullest row
   bool symmetric_ = false;
   mutable std::once_flag dense_once_;
   mutable std::atomic<bool> dense_built_{false};

@@ -106,7 +106,9 @@ class DefaultSolver final : public ContactSolver {
   Eigen::SimplicialLLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::AMDOrdering<int>> stick_sparse_llt_;
   // Contacts listed body by body (a tower bottom to top) are often ordered well already: the
   // natural order, when it fills no more than AMD's, saves permuting A at every factorization.
-  Eigen::SimplicialLLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>> stick_natural_llt_;
+  // (Upper: with no permutation Eigen then factors the input's upper triangle in place of copying
+  // a permuted one; A is stored whole and symmetric, so both triangles hold it.)
+  Eigen::SimplicialLLT<Eigen::SparseMatrix<double>, Eigen::Upper, Eigen::NaturalOrdering<int>> stick_natural_llt_;
   bool stick_natural_ = false;
   Eigen::SparseMatrix<double> stick_sparse_;              // a dense A's entries, when sparse enough
   std::vector<int> stick_outer_, stick_inner_;            // the pattern analysed last

@@ -13,8 +13,9 @@
 // The verdict evaluates it at the returned (double) lambda, in double first and, when
 // that is not decisive, in extended precision (long double: a 64-bit mantissa on
 // x86-64), and bounds the evaluation's rounding error: the product u = A lambda - b is off by at most
-// gamma (|A||lambda| + |b|) per row (gamma = (m + 2) eps, the worst case of
-// an m-term dot product), which carries over to w and r; a block whose
+// gamma (|A||lambda| + |b|) per row (gamma = (k + 2) eps, the worst case of
+// a k-term dot product, k = DelassusOperator::maxRowEntries(): m dense, the
+// fullest row sparse), which carries over to w and r; a block whose
 // lambda - w is within that error of a region boundary, or slips, adds
 // eps (|lambda_i| + |lambda_i - w_i|) for the subtraction. Then
 //
