@@ -43,7 +43,12 @@ Eigen::Matrix<double, K, K> coneProjectionJacobian(const Eigen::Matrix<double, K
 }
 
 // Every block strictly inside its cone: a unilateral row pushing, a friction block's tangential
-// force below mu times a positive normal force (bilateral rows: any value).
+// force below mu times a positive normal force (bilateral rows: any value), by a relative margin:
+// a block at the edge of slipping (statically indeterminate friction left at mu |lambda_n| by an
+// earlier solve, as in a grid of resting cubes) would most likely leave the cone in the
+// all-stick solution, and the factorization would be wasted.
+constexpr double kInsideMargin = 1e-6;
+
 bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& lam) {
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
@@ -55,10 +60,10 @@ bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& l
         if (!(lam[o] > 0.0)) return false;
         break;
       case ConstraintKind::kPlanarFriction:
-        if (!(std::abs(lam[o]) < cons[i].mu * lam[o + 1])) return false;
+        if (!(std::abs(lam[o]) < (1.0 - kInsideMargin) * cons[i].mu * lam[o + 1])) return false;
         break;
       case ConstraintKind::kSpatialFriction:
-        if (!(norm2(lam[o], lam[o + 1]) < cons[i].mu * lam[o + 2])) return false;
+        if (!(norm2(lam[o], lam[o + 1]) < (1.0 - kInsideMargin) * cons[i].mu * lam[o + 2])) return false;
         break;
     }
   }
