@@ -45,6 +45,24 @@ def test_parts_reproduce_the_world_model(scene):
     assert np.array_equal(A, A.T)
 
 
+def test_a_robots_operator_on_the_coordinates_its_contacts_move():
+    """TALOS on its two soles: the contacts move the base and the legs, 18 of 38 coordinates; A is
+    assembled from U, D and J restricted to those (their ancestors included) and equals
+    J M^-1 J^T of the whole model, computed independently."""
+    sim = Simulator(load_scene("talos-stand"))
+    sim.rollout(0.02)
+    q = np.asarray(sim.data.q).copy()
+    v = 0.1 * np.random.default_rng(4).standard_normal(sim.scene.model.nv)
+    _core.build_contact_problem(sim.model, sim.data, q, v, 1e-3, 0.5)
+    J = np.asarray(sim.data.J)
+    moved = np.flatnonzero(np.abs(J).max(axis=0))
+    assert J.shape == (24, 38) and len(moved) == 18  # the free flyer and two legs of 6
+    M_ref, _, A_ref = world_reference(sim, q, v)
+    A = np.asarray(sim.data.A)
+    assert np.abs(A - A_ref).max() <= 1e-12 * np.abs(A_ref).max()
+    assert np.array_equal(A, A.T)
+
+
 def test_contacts_between_parts_couple_them():
     """In a stack the contacts between two cubes belong to both parts: J has both cubes' columns,
     and A couples the contacts under and over a cube (the tower's A is block tridiagonal)."""
