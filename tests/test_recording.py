@@ -5,6 +5,7 @@ three.js scene graph (visibility through its parents, world length, direction, m
 colour) and compared with the trajectory's forces and contact states."""
 import dataclasses
 import json
+from pathlib import Path
 import math
 import re
 import shutil
@@ -176,22 +177,28 @@ def test_recording_is_self_contained(recording):
 _probe_cache = {}
 
 
-def _probe(recordings, name, tmp_path_factory):
+def _run_probe(path, times, tmp_path_factory):
+    """The page at `path` opened in headless Chromium with the probe appended: per time, the
+    visible contact meshes (per node c<i>) and pixel counts."""
     if CHROMIUM is None:
         pytest.skip("chromium not installed (make test installs it as root)")
+    times = [t if t == 0 else t + EPS for t in times]
+    tmp = tmp_path_factory.mktemp("probe")
+    probe = tmp / "probe.html"
+    probe.write_text(Path(path).read_text().replace("</body>", PROBE % json.dumps(times)))
+    out = run_chromium(["--window-size=640,480", "--virtual-time-budget=4000", "--dump-dom", str(probe)],
+                       tmp / "profile")
+    m = re.search(r'<pre id="probe">(.*?)</pre>', out)
+    assert m, "the page did not run its scripts"
+    got = json.loads(m.group(1).replace("&quot;", '"').replace("&amp;", "&"))
+    assert "error" not in got, got
+    return got
+
+
+def _probe(recordings, name, tmp_path_factory):
     if name not in _probe_cache:
         _, _, path, info = recordings[name]
-        times = [t if t == 0 else t + EPS for t in CASES[name][2]]
-        tmp = tmp_path_factory.mktemp("probe")
-        probe = tmp / "probe.html"
-        probe.write_text(path.read_text().replace("</body>", PROBE % json.dumps(times)))
-        out = run_chromium(["--window-size=640,480", "--virtual-time-budget=4000", "--dump-dom", str(probe)],
-                           tmp / "profile")
-        m = re.search(r'<pre id="probe">(.*?)</pre>', out)
-        assert m, "the page did not run its scripts"
-        got = json.loads(m.group(1).replace("&quot;", '"').replace("&amp;", "&"))
-        assert "error" not in got, got
-        _probe_cache[name] = got
+        _probe_cache[name] = _run_probe(path, CASES[name][2], tmp_path_factory)
     return _probe_cache[name]
 
 
@@ -393,3 +400,29 @@ def test_bilateral_closed_contacts_get_their_own_arrow(recordings, tmp_path):
     info = record_html(sim, dataclasses.replace(traj, states=states), tmp_path / "closed.html", fps=FPS)
     html = (tmp_path / "closed.html").read_text()
     assert info["tracks"] == 17 + 4 * 4 and "closed (bilateral)" in html and "#2255dd" in html
+
+
+def test_coal_pair_forces_are_drawn_where_the_ball_rests_on_the_table(tmp_path_factory):
+    """ball-on-table: the ball (0.5 kg) touches the table through a coal pair (ball_0|table), not a
+    sphere contact. Once it rests, the page shows at that pair's slot one green arrow from the top
+    of the table under the ball, straight up (the force on the pair's first geometry, the ball),
+    m g / scale long; the pair with the ground (never closed) has no node."""
+    sim = Simulator("ball-on-table")
+    traj = sim.rollout(1.0)
+    path = tmp_path_factory.mktemp("pair") / "ball.html"
+    info = record_html(sim, traj, path, fps=FPS)
+    # the ball's visual, then one drawn contact: its marker, stick and slip arrows
+    assert info["tracks"] == len(sim.scene.visual_model.geometryObjects) + 3
+    got = _run_probe(path, [0.9, 1.0], tmp_path_factory)
+    assert all(set(fr["contacts"]) == {"c1"} for fr in got["frames"])  # slot 0, ball|ground: never closed
+    ball = traj.q[-1, :3]
+    for fr in got["frames"]:
+        arrows = _arrows(fr["contacts"]["c1"])
+        assert list(arrows) == ["stick"], (fr["t"], list(arrows))
+        (meshes, shaft), = arrows.values()
+        assert {_hue(m["color"]) for m in meshes} == {"green"}
+        base, vec = np.asarray(shaft["base"]), np.subtract(shaft["tip"], shaft["base"])
+        np.testing.assert_allclose(base, [ball[0], ball[1], 0.2], atol=1e-3)
+        length = float(np.linalg.norm(vec))
+        assert length == pytest.approx(0.5 * 9.81 / info["force_scale"], rel=0.02)
+        assert vec[2] / length > math.cos(math.radians(1.0))  # up, on the ball

@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from . import _core
+
 # Arrow colours per contact state (traj.states: 0 open, 1 stick, 2 slip, 3 closed/bilateral).
 COLORS = {"stick": 0x22AA44, "slip": 0xDD2222, "closed": 0x2255DD}
 STATE_CODES = {"stick": 1, "slip": 2, "closed": 3}
@@ -171,6 +173,26 @@ def visual_poses(visual_model, oMi: np.ndarray) -> np.ndarray:
     return np.einsum("kgab,gbc->kgac", oMi[:, parents], local)
 
 
+def _pair_slots(sim, traj, idx) -> tuple[np.ndarray, np.ndarray]:
+    """The point and the (t1, t2, n) frame (columns) of every coal pair slot at the trajectory rows
+    `idx`, as the solve of each row's step saw them: detection run again (on a scratch
+    SimulatorData) at the configuration the step started from, row j - 1 when the rows are
+    consecutive steps (row 0 and coarser recordings: row j). Returns (len(idx), slots, 3) and
+    (len(idx), slots, 3, 3)."""
+    nc = len(sim.scene.contacts)
+    slots = traj.lam.shape[1] - nc
+    scratch = _core.SimulatorData(sim.model)
+    dt = sim.model.settings.dt
+    points, frames = np.zeros((len(idx), slots, 3)), np.zeros((len(idx), slots, 3, 3))
+    for k, j in enumerate(idx):
+        start = j - 1 if j > 0 and abs((traj.t[j] - traj.t[j - 1]) - dt) <= 1e-9 * max(1.0, dt) else j
+        _core.build_contact_problem(sim.model, scratch, traj.q[start], traj.v[start], dt, 0.5)
+        points[k] = np.asarray(scratch.pair_points).T[nc:]
+        frames[k] = np.stack([np.asarray(scratch.pair_t1).T[nc:], np.asarray(scratch.pair_t2).T[nc:],
+                              np.asarray(scratch.pair_normals).T[nc:]], axis=2)
+    return points, frames
+
+
 def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: float | None = None) -> dict:
     """Write `traj` of simulator `sim` to a self-contained HTML file (meshcat viewer).
 
@@ -185,8 +207,11 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
     length are keyed per frame and interpolate linearly between frames; visibility is
     keyed as booleans (discrete: the state of frame k holds until frame k + 1), and a hidden
     arrow holds its last shown pose, so a state change never shows a shrinking arrow of the
-    old state. Coal geometry-pair contacts (e.g. ball-on-table) are not drawn: their contact
-    point and normal per slot are not in the trajectory.
+    old state. Coal geometry-pair contacts (ball-on-table, the bodies of a pile) are drawn the
+    same way, for the slots closed at some frame: the arrow shows the force on the pair's
+    *first* geometry (the ball on the table), from the slot's point; their points and frames are
+    not in the trajectory, so the recorder runs detection again at the configuration each
+    drawn step solved at (`_pair_slots`).
 
     The slope is drawn by tilting the scene's root node (gravity is tilted in the physics).
     The camera (meshcat's, 75 degree field of view) is placed so that the bounding sphere
@@ -238,7 +263,7 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
     times = np.arange(0.0, traj.t[-1] - traj.t[0] + 1e-9, 1.0 / fps)
     idx = np.searchsorted(traj.t - traj.t[0], times - 1e-9).clip(0, len(traj.t) - 1)
     nf = len(idx)
-    nc = len(scene.contacts)  # coal pair slots (after these) are not drawn
+    nc = len(scene.contacts)  # sphere/point contacts; coal pair slots follow them (_pair_slots)
     oMi = sim.joint_placements(traj.q[idx])  # (nf, joints, 4, 4), part by part: no world Data
     parents = [model.frames[c.frame].parentJoint for c in scene.contacts]
     local = np.array([model.frames[c.frame].placement.act(np.asarray(c.offset)) for c in scene.contacts])
@@ -257,6 +282,20 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
     points = centers - np.array([c.radius for c in scene.contacts])[None, :, None] * normals
     forces = np.einsum("kiab,kib->kia", frames, traj.lam[idx, :nc])
     states = traj.states[idx, :nc].astype(int)
+    ids = list(range(nc))  # the candidate each drawn contact is (node c<id>)
+    if traj.lam.shape[1] > nc:  # coal pair slots: the ones closed at some drawn frame
+        pair_states = traj.states[idx, nc:].astype(int)
+        used = np.flatnonzero((pair_states > 0).any(axis=0))
+        if used.size:
+            pair_points, pair_frames = _pair_slots(sim, traj, idx)
+            pair_points, pair_frames = pair_points[:, used], pair_frames[:, used]
+            # the force on the pair's first geometry: lambda acts on the second along the frame
+            pair_forces = -np.einsum("kiab,kib->kia", pair_frames, traj.lam[idx][:, nc + used])
+            points = np.concatenate([points, pair_points], axis=1)
+            normals = np.concatenate([normals, -pair_frames[..., 2]], axis=1)
+            forces = np.concatenate([forces, pair_forces], axis=1)
+            states = np.concatenate([states, pair_states[:, used]], axis=1)
+            ids += [nc + int(u) for u in used]
     drawn = ["stick", "slip"] + (["closed"] if (states == 3).any() else [])
 
     # ---- the robot over the trajectory: poses, and its bounding box (physics frame)
@@ -300,11 +339,11 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
     # ---- arrows: a shaft (unit cylinder along y, scaled) and a cone at its tip, per state
     r_shaft = float(np.clip(0.006 * size, 0.001, 0.01))
     r_head, h_head = 2.5 * r_shaft, 7.5 * r_shaft
-    for i in range(nc):
-        vis[f"{root}/contacts/c{i}/point"].set_object(mg.Sphere(max(1.5 * r_shaft, 0.003)),
-                                                       mg.MeshLambertMaterial(color=0x333333))
+    for i, cid in enumerate(ids):
+        vis[f"{root}/contacts/c{cid}/point"].set_object(mg.Sphere(max(1.5 * r_shaft, 0.003)),
+                                                         mg.MeshLambertMaterial(color=0x333333))
         for s in drawn:
-            node = vis[f"{root}/contacts/c{i}/{s}"]
+            node = vis[f"{root}/contacts/c{cid}/{s}"]
             mat = mg.MeshLambertMaterial(color=COLORS[s])
             node["shaft"].set_object(mg.Cylinder(1.0, r_shaft), mat)
             node["head"].set_object(mg.Cylinder(h_head, radiusTop=0.0, radiusBottom=r_head), mat)
@@ -315,12 +354,12 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
         with anim.at_frame(vis, frame_no) as frame:
             for g, name in enumerate(names):
                 frame[name].set_transform(poses[frame_no, g])
-            for i in range(nc):
+            for i, cid in enumerate(ids):
                 P = np.eye(4)
                 P[:3, 3] = points[frame_no, i]
-                frame[f"{root}/contacts/c{i}/point"].set_transform(P)
+                frame[f"{root}/contacts/c{cid}/point"].set_transform(P)
     clips = anim.lower()
-    for i in range(nc):
+    for i, cid in enumerate(ids):
         # a closed contact without force: a cone on the contact point, along the normal
         quats = [_quat_y_to(unit[k, i] if mags[k, i] > 1e-12 else normals[k, i]) for k in range(nf)]
         for s in drawn:
@@ -343,7 +382,7 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
                 _track("shaft.position", "vector3", shaft),
                 _track("head.position", "vector3", head),
             ]
-            clips.append({"path": vis[f"{root}/contacts/c{i}/{s}"].path.lower(),
+            clips.append({"path": vis[f"{root}/contacts/c{cid}/{s}"].path.lower(),
                           "clip": {"fps": fps, "name": "default", "tracks": tracks}})
     for g, name in enumerate(names):  # the first pose (what viz.display(q0) would set)
         vis[name].set_transform(poses[0, g])

@@ -106,6 +106,8 @@ Eigen::MatrixXd get_anchor_lambda(const SimulatorData& d) { return d.anchor_lamb
 Eigen::MatrixXd get_candidate_velocity(const SimulatorData& d) { return d.candidate_velocity; }
 Eigen::MatrixXd get_pair_points(const SimulatorData& d) { return d.slot_point; }
 Eigen::MatrixXd get_pair_normals(const SimulatorData& d) { return d.slot_normal; }
+Eigen::MatrixXd get_pair_t1(const SimulatorData& d) { return d.slot_t1; }
+Eigen::MatrixXd get_pair_t2(const SimulatorData& d) { return d.slot_t2; }
 SolverResult get_result(const SimulatorData& d) { return d.result; }
 Eigen::VectorXi get_candidate_rows(const SimulatorData& d) {
   return Eigen::Map<const Eigen::VectorXi>(d.candidate_rows.data(), static_cast<Eigen::Index>(d.candidate_rows.size()));
@@ -370,6 +372,9 @@ void exposeSimulator() {
       .add_property("pair_normals", &get_pair_normals,
                     "3 x candidates: the normal of each coal pair slot, from the pair's first geometry to its "
                     "second (sphere contacts: 0)")
+      .add_property("pair_t1", &get_pair_t1,
+                    "3 x candidates: each coal pair slot's first tangent (rows t1, t2, n: the slot's lambda)")
+      .add_property("pair_t2", &get_pair_t2, "3 x candidates: each coal pair slot's second tangent")
       .add_property("states", &get_states)
       .add_property("rows", &get_candidate_rows, "per candidate: rows in the last problem (0: inactive)")
       .add_property("result", &get_result)
