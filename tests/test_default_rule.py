@@ -201,11 +201,10 @@ def test_a_warm_started_tower_step_is_the_sticking_step():
     r = sim.data.result
     assert traj.converged[1:].all()
     assert r.converged and 64 < len(r.lam) <= 384
-    assert stage_names(r) == ["sticking step"] and r.iterations <= kStickSolves(), r.stages
+    assert stage_names(r) == ["sticking step"] and r.iterations <= STICK_SOLVES, r.stages
 
 
-def kStickSolves():
-    return 4  # DefaultSolver::kStickSolves
+STICK_SOLVES = 4  # DefaultSolver::kStickSolves: the refinement solves the sticking step takes at most
 
 
 def test_a_warm_start_that_stalls_is_retried_from_zero():

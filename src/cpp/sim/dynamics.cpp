@@ -178,7 +178,8 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     entries += n * n;
   }
   // Sparse when the parts leave most of A empty: many parts, more rows than the dense
-  // solvers handle well (the default rule's threshold), at most 10 % of the entries.
+  // solvers handle well (the default rule's threshold), at most 25 % of the entries (a tower's
+  // block-tridiagonal A is 14-20 %).
   sd.sparse = sd.parts.size() > 1 && rows > kSparseDelassusRows && entries * 4 <= rows * rows;
   if (sd.sparse && !sd.parts_share_rows) {
     // Every row in one part: column c of A is its part's column, rows in the part's (ascending)
@@ -217,12 +218,12 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     // rows), their positions in A_sparse are known: the shares are summed in place rather than
     // sorted again (setFromTriplets was a third of a tower's step).
     const auto count = static_cast<std::size_t>(entries);
-    bool same = sd.A_sparse.rows() == rows && sd.triplet_position.size() == count && sd.triplet_entry.size() == count;
+    bool same = sd.A_sparse.rows() == rows && sd.triplet_position.size() == count && sd.triplets.size() == count;
     std::size_t k = 0;
     for (const SystemWork& w : sd.parts)
       for (Eigen::Index c = 0; same && c < w.A.cols() && !w.rows.empty(); ++c)
         for (Eigen::Index r = 0; r < w.A.rows(); ++r, ++k)
-          if (sd.triplet_entry[k].first != w.rows[r] || sd.triplet_entry[k].second != w.rows[c]) {
+          if (sd.triplets[k].row() != w.rows[r] || sd.triplets[k].col() != w.rows[c]) {
             same = false;
             break;
           }
@@ -238,14 +239,9 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     }
     sd.triplets.clear();
     sd.triplets.reserve(count);
-    sd.triplet_entry.clear();
-    sd.triplet_entry.reserve(count);
     for (const SystemWork& w : sd.parts)
       for (Eigen::Index c = 0; c < w.A.cols() && !w.rows.empty(); ++c)
-        for (Eigen::Index r = 0; r < w.A.rows(); ++r) {
-          sd.triplets.emplace_back(w.rows[r], w.rows[c], w.A(r, c));
-          sd.triplet_entry.emplace_back(w.rows[r], w.rows[c]);
-        }
+        for (Eigen::Index r = 0; r < w.A.rows(); ++r) sd.triplets.emplace_back(w.rows[r], w.rows[c], w.A(r, c));
     sd.A_sparse.resize(rows, rows);
     sd.A_sparse.setFromTriplets(sd.triplets.begin(), sd.triplets.end());
     sd.A_sparse.makeCompressed();
@@ -254,7 +250,7 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     const int* outer = sd.A_sparse.outerIndexPtr();
     const int* inner = sd.A_sparse.innerIndexPtr();
     for (std::size_t t = 0; t < count; ++t) {
-      const int row = sd.triplet_entry[t].first, col = sd.triplet_entry[t].second;
+      const int row = sd.triplets[t].row(), col = sd.triplets[t].col();
       sd.triplet_position[t] = static_cast<int>(std::lower_bound(inner + outer[col], inner + outer[col + 1], row) - inner);
     }
     sd.A.resize(0, 0);

@@ -93,8 +93,8 @@ class DefaultSolver final : public ContactSolver {
   /// The all-stick solution near lam: (A + rho I) d = b - A x from x = lam, refined. The
   /// correction lies in A's range, so where A is rank-deficient (the four corners of a sole:
   /// 12 rows of rank 6; a tower's interfaces) the forces keep the guess's share of the
-  /// non-unique part instead of drifting within the solution set, and one factorization
-  /// replaces Newton's regularised steps. True (lam replaced) when StoppingTest says converged;
+  /// non-unique part, and one factorization replaces Newton's regularised steps (2.3 a step on
+  /// TALOS, each an LU). True (lam replaced) when StoppingTest says converged;
   /// else lam is unchanged. `solves`: the refinement solves done.
   bool stickingStep(const ContactProblem& problem, Eigen::VectorXd& lam, double tolerance, int& solves);
 

@@ -268,8 +268,7 @@ class SimulatorData {
   std::unique_ptr<ContactSolver> solver;
   std::vector<Eigen::VectorXd> stage_v, stage_a;
   std::vector<int> part_fill;  ///< per part: rows placed so far (contactJacobians)
-  std::vector<Eigen::Triplet<double>> triplets;  ///< the sparse A's entries, part by part
-  std::vector<std::pair<int, int>> triplet_entry;  ///< their (row, column), as last assembled
+  std::vector<Eigen::Triplet<double>> triplets;  ///< the sparse A's entries, part by part, as last assembled
   std::vector<int> triplet_position;  ///< where each sits in A_sparse's compressed storage
   bool parts_share_rows = false;  ///< a contact between two parts: its rows in both
   std::vector<int> row_part, row_local;  ///< per row: its part and local row (rows in one part each)
