@@ -33,7 +33,7 @@ double distanceToDualCone(double wt_norm, double wn, double mu) {
 }  // namespace
 
 void measureExactLaw(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
-                     ExactLawMeasures& out, double relative_speed_floor) {
+                     ExactLawMeasures& out, double relative_speed_floor, const Eigen::VectorXd* u) {
   const Eigen::Index m = problem.numRows();
   if (lam.size() != m)
     throw std::invalid_argument("exact_law_measures: lambda has " + std::to_string(lam.size()) +
@@ -47,9 +47,13 @@ void measureExactLaw(const ContactProblem& problem, const Eigen::Ref<const Eigen
   const Eigen::Index nbi = static_cast<Eigen::Index>(nb);
 
   // u = A lambda - b (eq. 27), then the natural map exactly as every SolverResult reports it.
-  out.u.resize(m);
-  problem.delassus().multiply(lam, out.u);
-  out.u -= problem.b();
+  if (u != nullptr && u->size() == m) {
+    out.u = *u;
+  } else {
+    out.u.resize(m);
+    problem.delassus().multiply(lam, out.u);
+    out.u -= problem.b();
+  }
   out.b_norm = problem.b().norm();
   out.lambda_norm = lam.norm();
   out.natural_map = naturalMapNorm(problem, lam, out.u);

@@ -176,9 +176,12 @@ void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSet
     result.message = "no algorithm run";
   }
 
-  // The common verdict, whatever the algorithm (verdict.hpp).
-  problem.delassus().multiply(result.lam, result.u);
-  result.u -= problem.b();
+  // The common verdict, whatever the algorithm (verdict.hpp). (u as the stopping test's last
+  // verdict computed it when it judged this lambda.)
+  if (!lastVerdictResidual(problem, result.lam, result.u)) {
+    problem.delassus().multiply(result.lam, result.u);
+    result.u -= problem.b();
+  }
   const double scale = stoppingScale(problem);
   const double threshold = settings.tolerance * scale;
   VerdictMeasures measures;
@@ -247,7 +250,7 @@ void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSet
     result.own_converged = false;
   }
   result.divergence_candidates.clear();
-  measureExactLaw(problem, result.lam, result.exact_law);
+  measureExactLaw(problem, result.lam, result.exact_law, kRelativeSpeedFloor, &result.u);
   result.seconds = elapsed();
 }
 

@@ -158,10 +158,11 @@ namespace {
 
 // The measures, computed (measureVerdict adds a cache in front).
 void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
-                            VerdictMeasures& out, double decisive, bool per_block) {
+                            VerdictMeasures& out, double decisive, bool per_block, const Eigen::VectorXd* fresh_u,
+                            Eigen::VectorXd& ud) {
   using VectorExt = Eigen::Matrix<Extended, Eigen::Dynamic, 1>;
   // Workspace reused across calls (a verdict per simulator step: no allocation once sized).
-  thread_local Eigen::VectorXd abs_product, du, ud;
+  thread_local Eigen::VectorXd abs_product, du;
   thread_local VectorExt l, u;
   thread_local std::vector<double> block_bound, block_floor;
   const Eigen::Index m = problem.numRows();
@@ -183,9 +184,13 @@ void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<cons
   // 1. In double (vectorised; enough for a well-scaled problem): decisive when even
   //    its worst-case bound keeps it on one side of `decisive`.
   double gamma = (terms + 2.0) * kEps;
-  ud.resize(m);
-  problem.delassus().multiply(lam, ud);
-  ud -= problem.b();
+  if (fresh_u != nullptr) {
+    ud = *fresh_u;
+  } else {
+    ud.resize(m);
+    problem.delassus().multiply(lam, ud);
+    ud -= problem.b();
+  }
   du = gamma * (abs_product + problem.b().cwiseAbs());
   finish(evaluate<double>(problem, lam.data(), ud.data(), du.data(), &block_bound), kEps);
   if (out.natural_map + out.bound <= decisive || out.natural_map - out.bound > decisive) return;
@@ -206,6 +211,7 @@ void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<cons
 struct VerdictCache {
   const ContactProblem* problem = nullptr;
   Eigen::VectorXd lam;
+  Eigen::VectorXd u;  // A lambda - b in double
   double decisive = 0.0;
   VerdictMeasures out;
 };
@@ -214,8 +220,17 @@ thread_local VerdictCache last_verdict;
 
 void forgetVerdicts() { last_verdict.problem = nullptr; }
 
+bool lastVerdictResidual(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
+                         Eigen::VectorXd& u) {
+  const VerdictCache& cache = last_verdict;
+  if (cache.problem != &problem || cache.lam.size() != lam.size() || cache.u.size() != lam.size() || cache.lam != lam)
+    return false;
+  u = cache.u;
+  return true;
+}
+
 void measureVerdict(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
-                    VerdictMeasures& out, double decisive, bool per_block) {
+                    VerdictMeasures& out, double decisive, bool per_block, const Eigen::VectorXd* fresh_u) {
   VerdictCache& cache = last_verdict;
   if (!per_block && cache.problem == &problem && cache.decisive == decisive && cache.lam.size() == lam.size() &&
       cache.lam == lam) {
@@ -224,7 +239,7 @@ void measureVerdict(const ContactProblem& problem, const Eigen::Ref<const Eigen:
     out.floor = cache.out.floor;
     return;
   }
-  measureVerdictUncached(problem, lam, out, decisive, per_block);
+  measureVerdictUncached(problem, lam, out, decisive, per_block, fresh_u, cache.u);
   cache.problem = &problem;
   cache.lam = lam;
   cache.decisive = decisive;
@@ -307,10 +322,10 @@ bool beyondPrecision(const ContactProblem& problem, double min_solution_norm) {
 StoppingTest::StoppingTest(const ContactProblem& problem, double tolerance)
     : problem_(problem), threshold_(tolerance * stoppingScale(problem)) {}
 
-StoppingTest::Outcome StoppingTest::check(const Eigen::Ref<const Eigen::VectorXd>& lam,
-                                          const Eigen::Ref<const Eigen::VectorXd>& /*u*/, double natural_map) {
+StoppingTest::Outcome StoppingTest::check(const Eigen::Ref<const Eigen::VectorXd>& lam, const Eigen::VectorXd& u,
+                                          double natural_map, bool u_is_fresh) {
   if (!(natural_map <= threshold_)) return kContinue;
-  measureVerdict(problem_, lam, measures_, threshold_);
+  measureVerdict(problem_, lam, measures_, threshold_, false, u_is_fresh ? &u : nullptr);
   if (measures_.natural_map + measures_.bound <= threshold_) return kConverged;
   if (measures_.floor > kFloorMargin * threshold_) return kUnresolvable;
   return kContinue;  // within reach: a little more accuracy is needed

@@ -50,7 +50,13 @@ class DelassusOperator {
   /// y = A x in long double (the verdict's extended-precision stage)
   virtual void multiplyExtended(const Eigen::Matrix<long double, Eigen::Dynamic, 1>& x,
                                 Eigen::Matrix<long double, Eigen::Dynamic, 1>& y) const = 0;
-  virtual Eigen::VectorXd diagonal() const = 0;
+  /// A's diagonal, written into `out` (rows() entries; no allocation).
+  virtual void diagonal(Eigen::Ref<Eigen::VectorXd> out) const = 0;
+  Eigen::VectorXd diagonal() const {
+    Eigen::VectorXd d(rows());
+    diagonal(d);
+    return d;
+  }
   virtual double columnNorm(Eigen::Index j) const = 0;
   virtual double rowNorm(Eigen::Index i) const = 0;
   virtual bool allFinite() const = 0;
@@ -80,7 +86,8 @@ class DenseDelassus final : public DelassusOperator {
   void multiplyTransposed(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
   void multiplyExtended(const Eigen::Matrix<long double, Eigen::Dynamic, 1>& x,
                         Eigen::Matrix<long double, Eigen::Dynamic, 1>& y) const override;
-  Eigen::VectorXd diagonal() const override { return A_.diagonal(); }
+  using DelassusOperator::diagonal;
+  void diagonal(Eigen::Ref<Eigen::VectorXd> out) const override { out = A_.diagonal(); }
   double columnNorm(Eigen::Index j) const override { return A_.col(j).norm(); }
   double rowNorm(Eigen::Index i) const override { return A_.row(i).norm(); }
   bool allFinite() const override { return A_.allFinite(); }
@@ -117,7 +124,8 @@ class SparseDelassus final : public DelassusOperator {
   void multiplyTransposed(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
   void multiplyExtended(const Eigen::Matrix<long double, Eigen::Dynamic, 1>& x,
                         Eigen::Matrix<long double, Eigen::Dynamic, 1>& y) const override;
-  Eigen::VectorXd diagonal() const override { return diagonal_; }
+  using DelassusOperator::diagonal;
+  void diagonal(Eigen::Ref<Eigen::VectorXd> out) const override { out = diagonal_; }
   double columnNorm(Eigen::Index j) const override { return A_.col(j).norm(); }
   double rowNorm(Eigen::Index i) const override;
   bool allFinite() const override;

@@ -76,9 +76,10 @@ struct ExactLawMeasures {
 /// All the measures at an arbitrary lambda (numRows() entries; need not be feasible nor a
 /// solution). Pure; `out` is resized and overwritten, so reusing it allocates nothing once
 /// sized. Throws std::invalid_argument when lambda has the wrong size or
-/// relative_speed_floor < 0.
+/// relative_speed_floor < 0. u: A lambda - b when the caller has it (the solve driver's verdict).
 void measureExactLaw(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
-                     ExactLawMeasures& out, double relative_speed_floor = kRelativeSpeedFloor);
+                     ExactLawMeasures& out, double relative_speed_floor = kRelativeSpeedFloor,
+                     const Eigen::VectorXd* u = nullptr);
 
 /// Convenience: a fresh result.
 ExactLawMeasures exactLawMeasures(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,

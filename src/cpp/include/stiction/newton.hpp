@@ -85,21 +85,27 @@ class DefaultSolver final : public ContactSolver {
   /// A dense A with at most this fraction of nonzeros is factored sparsely by the sticking step
   /// (a tower's A: block-tridiagonal).
   static constexpr double kStickSparseDensity = 0.25;
+  /// The factor of an earlier call is tried first while A's diagonal is within this fraction (of
+  /// its largest entry) of the factored one's.
+  static constexpr double kStaleDiagonalChange = 1e-3;
 
   std::string name() const override { return "default"; }
   void iterate(const ContactProblem& problem, const SolverSettings& settings,
                SolverResult& result) override;
 
-  /// The all-stick solution near lam: (A + rho I) d = b - A x from x = lam, refined. The
-  /// correction lies in A's range, so where A is rank-deficient (the four corners of a sole:
-  /// 12 rows of rank 6; a tower's interfaces) the forces keep the guess's share of the
-  /// non-unique part, and one factorization replaces Newton's regularised steps (2.3 a step on
-  /// TALOS, each an LU). True (lam replaced) when StoppingTest says converged;
-  /// else lam is unchanged. `solves`: the refinement solves done.
+  /// The all-stick solution near lam: from x = lam, steps d = R^-1 A R^-1 (b - A x) with
+  /// R = A + rho I, refined. The correction lies in A's range, so where A is rank-deficient (the
+  /// four corners of a sole: 12 rows of rank 6; a tower's interfaces) the forces keep the guess's
+  /// share of the non-unique part, and one factorization replaces Newton's regularised steps (2.3
+  /// a step on TALOS, each an LU). The factor of the previous call is tried first while A's
+  /// diagonal is close to its matrix's (heldFactorFits). True (lam replaced) when StoppingTest says
+  /// converged; else lam is unchanged. `solves`: the refinement steps done (two solves each).
   bool stickingStep(const ContactProblem& problem, Eigen::VectorXd& lam, double tolerance, int& solves);
 
  private:
   bool factorShifted(const ContactProblem& problem, double shift);
+  bool heldFactorFits(const ContactProblem& problem) const;
+  void solveShifted(const Eigen::VectorXd& rhs, Eigen::VectorXd& x) const;  // x = (A + rho I)^-1 rhs
 
   Eigen::LLT<Eigen::MatrixXd> stick_llt_;
   Eigen::MatrixXd stick_shifted_;
@@ -114,7 +120,11 @@ class DefaultSolver final : public ContactSolver {
   std::vector<int> stick_outer_, stick_inner_;            // the pattern analysed last
   bool stick_sparse_path_ = false;
   bool stick_from_dense_ = false;  // stick_sparse_ holds a dense A's pattern
-  Eigen::VectorXd stick_x_, stick_u_, stick_d_;
+  Eigen::VectorXd stick_x_, stick_u_, stick_d_, stick_w_;
+  Eigen::Index stick_factor_rows_ = -1;    // the rows of the factor held (-1: none)
+  Eigen::VectorXd stick_factor_diagonal_;  // its matrix's diagonal
+  double stick_factor_shift_ = 0.0;        // and its shift rho
+  Eigen::VectorXd stick_diagonal_;         // this call's A's diagonal
   NsgsSolver nsgs_;
   NewtonSolver newton_;
   AdmmSolver admm_;

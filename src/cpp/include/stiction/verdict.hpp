@@ -83,8 +83,17 @@ struct VerdictMeasures {
 /// decisive when it keeps natural_map on one side of `decisive` (the threshold the
 /// caller tests: a well-scaled problem stops there), else in extended precision. block_floor only with
 /// per_block. No allocation once the (thread-local) workspace has the problem's size.
+/// fresh_u: u = A lambda - b as DelassusOperator::multiply and a subtraction of b computed it (the
+/// double stage then takes it rather than a product of its own; an iterate's incrementally updated u
+/// is not that: its rounding is not what the bound covers).
 void measureVerdict(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
-                    VerdictMeasures& out, double decisive, bool per_block = false);
+                    VerdictMeasures& out, double decisive, bool per_block = false,
+                    const Eigen::VectorXd* fresh_u = nullptr);
+
+/// u = A lambda - b for the lambda of the last verdict measured in this solve (the double
+/// stage's, bit for bit what a product would give): true and `u` written when lambda is that one.
+bool lastVerdictResidual(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
+                         Eigen::VectorXd& u);
 
 /// measureVerdict remembers its last answer (the stopping test and the driver often judge
 /// the same lambda); the driver forgets it at the start of every solve, as A and b may
@@ -123,8 +132,10 @@ class StoppingTest {
   enum Outcome { kContinue, kConverged, kUnresolvable };
 
   StoppingTest(const ContactProblem& problem, double tolerance);
-  Outcome check(const Eigen::Ref<const Eigen::VectorXd>& lam, const Eigen::Ref<const Eigen::VectorXd>& u,
-                double natural_map);
+  /// u_is_fresh: u is A lambda - b just multiplied (measureVerdict's fresh_u), not an iterate's
+  /// incrementally updated u.
+  Outcome check(const Eigen::Ref<const Eigen::VectorXd>& lam, const Eigen::VectorXd& u, double natural_map,
+                bool u_is_fresh = false);
   double threshold() const { return threshold_; }
 
  private:
