@@ -207,6 +207,65 @@ def test_a_warm_started_tower_step_is_the_sticking_step():
 STICK_SOLVES = 4  # DefaultSolver::kStickSolves: the refinement solves the sticking step takes at most
 
 
+def test_the_sticking_step_does_not_wander_along_the_null_space():
+    """b with a part no force can cancel (outside A's range: b's rounding, gaps no rigid motion fits).
+    A plain proximal step (A + rho I)^-1 (b - A lambda) moves lambda by that part / rho along A's null
+    space at every step (on a 64-box tower 2e-3 N s a step, until a corner left its cone); the
+    sticking step's steps are filtered to A's range, so the guess's share of the non-unique forces
+    stays where it was, to rounding."""
+    from stiction.problems import cube_on_ground
+
+    problem = cube_on_ground(mu=0.3).problem
+    A, b = np.asarray(problem.A), np.asarray(problem.b)
+    w, V = np.linalg.eigh(A)
+    null = V[:, w < 1e-9 * w.max()]
+    first = stiction.solve(problem)
+    stray = 1e-3 * 1e-10 * np.linalg.norm(b) * null[:, 0]  # well within the tolerance's reach
+    moved = stiction.spatial_problem(A, 1.001 * b + stray, 0.3)
+    rho = 1e-10 * np.abs(np.diag(A)).max()  # DefaultSolver::kStickShift
+    plain = np.linalg.solve(A + rho * np.eye(12), 1.001 * b + stray - A @ first.lam)
+    assert np.abs(null.T @ plain).max() >= 1e-4 * np.abs(first.lam).max()  # the drift a plain step makes
+    r = stiction.solve(moved, warm_start=first.lam)
+    assert r.converged and stage_names(r) == ["sticking step"], r.stages
+    assert np.abs(null.T @ (r.lam - first.lam)).max() <= 1e-7 * np.abs(first.lam).max()
+
+
+def test_the_held_factor_serves_a_resting_tower_and_never_decides_an_answer():
+    """The sticking step keeps its factor: on the next step of a resting tower (the same contacts, A
+    a step later) one refinement step with it converges and no factorization is needed. A held
+    factor of another matrix with the same diagonal only costs a try: the answer is the stopping
+    test's, as a fresh solver's."""
+    from stiction.scene import load_scene
+    from stiction.simulator import Simulator
+
+    sim = Simulator(load_scene("box-tower-20"))
+    sim.rollout(0.02)
+    outcomes = []
+    for _ in range(20):
+        sim.step()
+        outcomes.append(sim.data.result.stages[0].outcome)
+    assert outcomes.count("converged (held factor)") >= 15, outcomes
+    assert sim.data.result.converged
+
+    rng = np.random.default_rng(4)
+    from stiction.problems import cube_on_ground
+
+    problem = cube_on_ground(mu=0.3).problem
+    A, b = np.asarray(problem.A), np.asarray(problem.b)
+    first = stiction.solve(problem, solver="default")
+    stiction.solve(stiction.spatial_problem(A, 1.001 * b, 0.3), warm_start=first.lam)  # holds A's factor
+    # the same diagonal, other off-diagonal entries: a cube held differently
+    Q = np.eye(12) + 0.3 * np.diag(rng.uniform(-1, 1, 11), 1)
+    other = Q @ A @ Q.T
+    other *= np.sqrt(np.outer(np.diag(A), np.diag(A)) / np.outer(np.diag(other), np.diag(other)))
+    other = 0.5 * (other + other.T)
+    np.testing.assert_allclose(np.diag(other), np.diag(A), rtol=1e-12)
+    target = other @ first.lam * 1.001
+    r = stiction.solve(stiction.spatial_problem(other, target, 0.3), warm_start=first.lam)
+    assert r.converged and stage_names(r) == ["sticking step"], r.stages
+    np.testing.assert_allclose(other @ r.lam, target, rtol=0, atol=1e-10 * np.linalg.norm(target))
+
+
 def test_a_warm_start_that_stalls_is_retried_from_zero():
     """A 1e6 : 1 two-cube stack at dt = 0.1 ms: from the previous step's impulses, Newton stalls and
     ADMM ran out of budget on 58 of 5000 steps (first at step 1843); from zero the same problems

@@ -88,6 +88,8 @@ class DefaultSolver final : public ContactSolver {
   /// The factor of an earlier call is tried first while A's diagonal is within this fraction (of
   /// its largest entry) of the factored one's.
   static constexpr double kStaleDiagonalChange = 1e-3;
+  /// A held factor whose rate predicted a miss is tried again after this many calls.
+  static constexpr int kStaleRetry = 16;
 
   std::string name() const override { return "default"; }
   void iterate(const ContactProblem& problem, const SolverSettings& settings,
@@ -98,8 +100,9 @@ class DefaultSolver final : public ContactSolver {
   /// four corners of a sole: 12 rows of rank 6; a tower's interfaces) the forces keep the guess's
   /// share of the non-unique part, and one factorization replaces Newton's regularised steps (2.3
   /// a step on TALOS, each an LU). The factor of the previous call is tried first while A's
-  /// diagonal is close to its matrix's (heldFactorFits). True (lam replaced) when StoppingTest says
-  /// converged; else lam is unchanged. `solves`: the refinement steps done (two solves each).
+  /// diagonal is close to its matrix's (heldFactorFits) and it last did the work in one step.
+  /// True (lam replaced) when StoppingTest says converged; else lam is unchanged. `solves`: the
+  /// refinement steps done (two solves each).
   bool stickingStep(const ContactProblem& problem, Eigen::VectorXd& lam, double tolerance, int& solves);
 
  private:
@@ -124,6 +127,9 @@ class DefaultSolver final : public ContactSolver {
   Eigen::Index stick_factor_rows_ = -1;    // the rows of the factor held (-1: none)
   Eigen::VectorXd stick_factor_diagonal_;  // its matrix's diagonal
   double stick_factor_shift_ = 0.0;        // and its shift rho
+  double stale_rate_ = 0.0;   // the natural map's reduction by the held factor's first step, last try
+  int stale_skipped_ = 0;     // calls since the held factor was last tried
+  bool stick_used_held_ = false;  // the last sticking step converged with the held factor
   Eigen::VectorXd stick_diagonal_;         // this call's A's diagonal
   NsgsSolver nsgs_;
   NewtonSolver newton_;
