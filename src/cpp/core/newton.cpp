@@ -333,17 +333,19 @@ bool DefaultSolver::stickingStep(const ContactProblem& problem, Eigen::VectorXd&
     return -1;
   };
   // The factor of the previous call, while its matrix is close to this A (the same contacts a step
-  // later: a tower at rest, a robot standing) and its last use predicts one refinement step will do
-  // (its rate: the natural map's reduction by that first step): that step saves the factorization
+  // later: a tower at rest, a robot standing) and its last use converged in one refinement step or
+  // predicts one will do (its rate: the natural map's reduction by that first step, an upper bound
+  // when the step reached the rounding floor): that step saves the factorization
   // (a 256-contact tower's sparse Cholesky, a quarter of its step). Where A moves with the joints
   // (TALOS: 3.7e-4 -> 1.3e-9 by a stale factor, 5e-14 by a fresh one) a fresh factor is cheaper
   // than a second step; the stale one is tried again every kStaleRetry calls. Whatever the factor,
   // only StoppingTest's verdict is kept.
   if (heldFactorFits(problem)) {
-    if (stale_rate_ * initial_map <= test.threshold() || ++stale_skipped_ >= kStaleRetry) {
+    if (stale_one_step_ || stale_rate_ * initial_map <= test.threshold() || ++stale_skipped_ >= kStaleRetry) {
       stale_skipped_ = 0;
       const int done = refine();
       stale_rate_ = first_map >= 0.0 && initial_map > 0.0 ? first_map / initial_map : 1.0;
+      stale_one_step_ = done == 1 && solves == 1;
       if (done >= 0) {
         if (done == 1) lam = stick_x_;
         stick_used_held_ = done == 1;

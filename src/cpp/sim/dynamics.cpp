@@ -165,10 +165,10 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
       w.data.U.triangularView<Eigen::UnitUpper>().solveInPlace(w.W);
     }
     w.W = w.data.Dinv.cwiseSqrt().asDiagonal() * w.W;
-    if (n <= 12 && w.J.cols() <= 6) {
-      // a free body's few contacts (a cube's 4 corners: 12 rows x 6): a coefficient-wise product,
-      // exactly symmetric since (W^T W)_ij and _ji sum the same products in the same order
-      // (robots keep the rank update: TALOS's 24 x 44 was 5 us slower coefficient-wise)
+    if (w.J.cols() <= 6) {
+      // a free body's contacts (a cube's 4 corners: 12 rows x 6; a tower's box, 24): a coefficient-wise
+      // product of 6 terms each, exactly symmetric since (W^T W)_ij and _ji sum the same products in
+      // the same order (robots keep the rank update: TALOS's 24 x 44 was 5 us slower coefficient-wise)
       w.A.noalias() = w.W.transpose().lazyProduct(w.W);
     } else {
       w.A.setZero();
@@ -217,16 +217,13 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     // While the entries' (row, column) sequence is last step's (the same contacts on the same
     // rows), their positions in A_sparse are known: the shares are summed in place rather than
     // sorted again (setFromTriplets was a third of a tower's step).
+    // (The entries are listed part by part, column by column from each part's rows: the same rows
+    // per part, the same sequence.)
     const auto count = static_cast<std::size_t>(entries);
-    bool same = sd.A_sparse.rows() == rows && sd.triplet_position.size() == count && sd.triplets.size() == count;
+    bool same = sd.A_sparse.rows() == rows && sd.triplet_position.size() == count && sd.triplets.size() == count &&
+                sd.triplet_part_rows.size() == sd.parts.size();
+    for (std::size_t s = 0; same && s < sd.parts.size(); ++s) same = sd.parts[s].rows == sd.triplet_part_rows[s];
     std::size_t k = 0;
-    for (const SystemWork& w : sd.parts)
-      for (Eigen::Index c = 0; same && c < w.A.cols() && !w.rows.empty(); ++c)
-        for (Eigen::Index r = 0; r < w.A.rows(); ++r, ++k)
-          if (sd.triplets[k].row() != w.rows[r] || sd.triplets[k].col() != w.rows[c]) {
-            same = false;
-            break;
-          }
     if (same) {
       double* value = sd.A_sparse.valuePtr();
       std::fill(value, value + sd.A_sparse.nonZeros(), 0.0);
@@ -242,6 +239,8 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     for (const SystemWork& w : sd.parts)
       for (Eigen::Index c = 0; c < w.A.cols() && !w.rows.empty(); ++c)
         for (Eigen::Index r = 0; r < w.A.rows(); ++r) sd.triplets.emplace_back(w.rows[r], w.rows[c], w.A(r, c));
+    sd.triplet_part_rows.resize(sd.parts.size());
+    for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.triplet_part_rows[s] = sd.parts[s].rows;
     sd.A_sparse.resize(rows, rows);
     sd.A_sparse.setFromTriplets(sd.triplets.begin(), sd.triplets.end());
     sd.A_sparse.makeCompressed();

@@ -129,6 +129,7 @@ class DefaultSolver final : public ContactSolver {
   double stick_factor_shift_ = 0.0;        // and its shift rho
   double stale_rate_ = 0.0;   // the natural map's reduction by the held factor's first step, last try
   int stale_skipped_ = 0;     // calls since the held factor was last tried
+  bool stale_one_step_ = false;  // its last try converged in one refinement step
   bool stick_used_held_ = false;  // the last sticking step converged with the held factor
   Eigen::VectorXd stick_diagonal_;         // this call's A's diagonal
   NsgsSolver nsgs_;

@@ -270,6 +270,7 @@ class SimulatorData {
   std::vector<int> part_fill;  ///< per part: rows placed so far (contactJacobians)
   std::vector<Eigen::Triplet<double>> triplets;  ///< the sparse A's entries, part by part, as last assembled
   std::vector<int> triplet_position;  ///< where each sits in A_sparse's compressed storage
+  std::vector<std::vector<int>> triplet_part_rows;  ///< each part's rows when the triplets were listed
   bool parts_share_rows = false;  ///< a contact between two parts: its rows in both
   std::vector<int> row_part, row_local;  ///< per row: its part and local row (rows in one part each)
   Eigen::VectorXd row_scratch;  ///< one value per row
