@@ -266,6 +266,26 @@ def test_the_held_factor_serves_a_resting_tower_and_never_decides_an_answer():
     np.testing.assert_allclose(other @ r.lam, target, rtol=0, atol=1e-10 * np.linalg.norm(target))
 
 
+def test_a_resting_grid_is_solved_by_the_sticking_step():
+    """16 cubes side by side (192 rows): the first solves are Gauss-Seidel's, which leave some corners'
+    friction on the cone's boundary (the corners squeezing the ground at mu lambda_n: forces in A's
+    null space). The simulator starts such a sticking contact's guess without its friction, so once
+    the cubes rest each step is the sticking step (a Gauss-Seidel sweep and its verdict before), and
+    every corner's friction is strictly inside its cone."""
+    from stiction.scene import build_scene
+    from stiction.simulator import Simulator
+
+    sim = Simulator(build_scene({"name": "grid-16", "array": {"layout": "grid", "count": 16}, "ground": {"mu": 0.5}}))
+    traj = sim.rollout(0.05)
+    assert traj.converged[1:].all()
+    for _ in range(10):
+        sim.step()
+        r = sim.data.result
+        assert r.converged and stage_names(r) == ["sticking step"], r.stages
+    lam = np.asarray(r.lam).reshape(-1, 3)
+    assert (np.hypot(lam[:, 0], lam[:, 1]) < (1 - 1e-3) * 0.5 * lam[:, 2]).all()
+
+
 def test_a_warm_start_that_stalls_is_retried_from_zero():
     """A 1e6 : 1 two-cube stack at dt = 0.1 ms: from the previous step's impulses, Newton stalls and
     ADMM ran out of budget on 58 of 5000 steps (first at step 1843); from zero the same problems

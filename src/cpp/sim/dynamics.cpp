@@ -165,10 +165,17 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
       w.data.U.triangularView<Eigen::UnitUpper>().solveInPlace(w.W);
     }
     w.W = w.data.Dinv.cwiseSqrt().asDiagonal() * w.W;
-    if (w.J.cols() <= 6) {
-      // a free body's contacts (a cube's 4 corners: 12 rows x 6; a tower's box, 24): a coefficient-wise
-      // product of 6 terms each, exactly symmetric since (W^T W)_ij and _ji sum the same products in
-      // the same order (robots keep the rank update: TALOS's 24 x 44 was 5 us slower coefficient-wise)
+    if (w.W.rows() == 6) {
+      // a free body's contacts (a cube's 4 corners: 12 rows x 6; a tower's box, 24): one fixed-size
+      // 6-term dot product per entry of the lower triangle, mirrored (exactly symmetric; Eigen's
+      // dynamic-size coefficient-wise product spent most of its time in loop set-up at this size)
+      const Eigen::Map<const Eigen::Matrix<double, 6, Eigen::Dynamic>> W6(w.W.data(), 6, n);
+      for (Eigen::Index c = 0; c < n; ++c) {
+        const Eigen::Matrix<double, 6, 1> wc = W6.col(c);
+        for (Eigen::Index r = c; r < n; ++r) w.A(r, c) = w.A(c, r) = W6.col(r).dot(wc);
+      }
+    } else if (w.J.cols() <= 6) {
+      // (robots keep the rank update below: TALOS's 24 x 44 was 5 us slower coefficient-wise)
       w.A.noalias() = w.W.transpose().lazyProduct(w.W);
     } else {
       w.A.setZero();

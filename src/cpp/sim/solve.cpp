@@ -17,6 +17,9 @@ namespace {
 // to ||b||) diverged, whatever the tolerance (verdict.hpp).
 constexpr double kDivergedFloor = kLooseTolerance;
 
+// A sticking contact's friction within this fraction of mu lambda_n is on the cone's boundary.
+constexpr double kBoundaryMargin = 1e-3;
+
 // The name of block `blk` of the current problem: a candidate contact, then the anchors.
 std::string blockName(const SimulatorModel& sim, const SimulatorData& sd, int blk) {
   if (blk < static_cast<int>(sd.active.size())) {
@@ -108,6 +111,16 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     if (sd.have_candidate_lambda[i]) {
       any = true;
       fromSlots(scale * sd.candidate_lambda.col(i), k, sd.guess.data() + row);
+      // A contact that stuck with its friction on the cone's boundary holds forces its body does not
+      // need (a resting cube's corners squeezing the ground at mu lambda_n, as Gauss-Seidel leaves
+      // them: they lie in A's null space). Its guess starts without them, inside the cone, so the
+      // solver's sticking step applies (docs/solvers.md); the part of the friction the body needs is
+      // in A's range and comes back with the first step.
+      if (k > 1 && sd.candidate_states[i] == ContactState::kStick) {
+        const auto tangent = sd.guess.segment(row, k - 1);
+        if (tangent.norm() >= (1.0 - kBoundaryMargin) * candidateMu(sim, i) * sd.guess[row + k - 1])
+          sd.guess.segment(row, k - 1).setZero();
+      }
     } else {
       sd.guess.segment(row, k).setZero();
     }
