@@ -45,6 +45,69 @@ def test_parts_reproduce_the_world_model(scene):
     assert np.array_equal(A, A.T)
 
 
+def point_jacobian(model, data, frame, point):
+    """The world velocity of the material point `point` (world) of frame `frame`'s body, from
+    Pinocchio's joint Jacobian: v_o + omega x (p - o), 3 x nv (zeros for the universe)."""
+    if frame == 0:
+        return np.zeros((3, model.nv))
+    joint = model.frames[frame].parentJoint
+    Jj = pin.getJointJacobian(model, data, joint, pin.LOCAL_WORLD_ALIGNED)
+    r = point - data.oMi[joint].translation
+    skew = np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
+    return Jj[:3] - skew @ Jj[3:]
+
+
+def point_acceleration(model, data, frame, point):
+    """The classical acceleration (world axes) of the material point `point` of frame `frame`'s body
+    from Pinocchio's forward kinematics (at zero joint acceleration): R (a + alpha x r + omega x v_p)."""
+    if frame == 0:
+        return np.zeros(3)
+    joint = model.frames[frame].parentJoint
+    M = data.oMi[joint]
+    r = M.actInv(point)
+    vj, aj = data.v[joint], data.a[joint]
+    v_point = vj.linear + np.cross(vj.angular, r)
+    return M.rotation @ (aj.linear + np.cross(aj.angular, r) + np.cross(vj.angular, v_point))
+
+
+def test_free_body_contact_rows_match_pinocchio():
+    """The contact rows of free bodies (computed in closed form: R v - [R r]x R omega per point) equal
+    the frame (t1, t2, n) times the relative point Jacobian from Pinocchio's own joint Jacobians of
+    the whole world, for a tower's corners on the box below (both bodies move) at a moving state; and
+    their drifts J' v (R omega x (v + omega x r)) the relative classical accelerations."""
+    sim = Simulator(load_scene("box-tower-20"))
+    sim.rollout(0.02)
+    rng = np.random.default_rng(5)
+    q = np.asarray(sim.data.q).copy()
+    v = 0.3 * rng.standard_normal(sim.scene.model.nv)
+    _core.build_contact_problem(sim.model, sim.data, q, v, 1e-3, 0.5)
+    model = sim.scene.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    J, drift = np.asarray(sim.data.J), np.asarray(sim.data.drift)
+    halfspaces = sim.model.halfspaces
+    row, checked = 0, 0
+    for i in sim.data.active:
+        c = sim.scene.contacts[i]
+        h = halfspaces[c.halfspace]
+        point = data.oMf[c.frame].act(np.asarray(c.offset))  # radius 0: the corner itself
+        if h.frame:
+            R = data.oMf[h.frame].rotation
+            T = np.vstack([R @ h.tangent1, R @ h.tangent2, R @ h.normal])
+        else:
+            T = np.vstack([h.tangent1, h.tangent2, h.normal])
+        rel = point_jacobian(model, data, c.frame, point) - point_jacobian(model, data, h.frame, point)
+        np.testing.assert_allclose(J[row:row + 3], T @ rel, rtol=0, atol=1e-13)
+        # the drift J' v: the corner's classical acceleration relative to the face's material point
+        acc = point_acceleration(model, data, c.frame, point) - point_acceleration(model, data, h.frame, point)
+        np.testing.assert_allclose(drift[row:row + 3], T @ acc, rtol=0, atol=1e-12)
+        checked += h.frame != 0
+        row += 3
+    assert row == J.shape[0] and checked >= 60  # 19 interfaces of 4 corners between two moving boxes
+
+
 def test_a_robots_operator_on_the_coordinates_its_contacts_move():
     """TALOS on its two soles: the contacts move the base and the legs, 18 of 38 coordinates; A is
     assembled from U, D and J restricted to those (their ancestors included) and equals

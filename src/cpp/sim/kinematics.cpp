@@ -58,6 +58,16 @@ std::array<int, 2> blockParts(const SimulatorModel& sim, const BlockBodies& b) {
   return {s1, s2 != s1 ? s2 : -1};
 }
 
+// Jrel += sign [R, -[R r]x R]: the world velocity of the material point r (joint frame) of a free
+// flyer whose velocity is (v, omega) in its own frame.
+void addFreeBodyPointJacobian(const Eigen::Matrix3d& R, const Eigen::Vector3d& r, double sign, Eigen::Matrix3Xd& Jrel) {
+  const Eigen::Vector3d rw = R * r;
+  Eigen::Matrix3d skew;
+  skew << 0.0, -rw.z(), rw.y(), rw.z(), 0.0, -rw.x(), -rw.y(), rw.x(), 0.0;
+  Jrel.leftCols<3>() += sign * R;
+  Jrel.rightCols<3>().noalias() -= sign * (skew * R);
+}
+
 // Rows [row, row + k) of the problem belong to the parts the block touches.
 void reserveRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& b, Eigen::Index row, int k) {
   const std::array<int, 2> parts = blockParts(sim, b);
@@ -80,16 +90,25 @@ void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& 
     const pinocchio::Model& m = sim.systems[s].model;
     SystemWork& w = sd.parts[s];
     w.Jrel.setZero();
-    if (partOf(sim, b.plus) == s) {
-      w.J6.setZero();
-      pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.plus], at_plus, pinocchio::LOCAL_WORLD_ALIGNED, w.J6);
-      w.Jrel += w.J6.topRows<3>();
-    }
-    if (partOf(sim, b.minus) == s) {
-      w.J6.setZero();
-      pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.minus], at_minus, pinocchio::LOCAL_WORLD_ALIGNED,
-                                  w.J6);
-      w.Jrel -= w.J6.topRows<3>();
+    if (sim.systems[s].free_body) {
+      // One free flyer (v = (v, omega) in its own frame): a material point r (joint frame) moves at
+      // R (v + omega x r) = R v - [R r]x R omega. (Pinocchio's frame Jacobian, 6 x 6 from the joint
+      // Jacobian, was half of a tower's kinematics.)
+      const Eigen::Matrix3d& R = w.data.oMi[1].rotation();
+      if (partOf(sim, b.plus) == s) addFreeBodyPointJacobian(R, at_plus.translation(), 1.0, w.Jrel);
+      if (partOf(sim, b.minus) == s) addFreeBodyPointJacobian(R, at_minus.translation(), -1.0, w.Jrel);
+    } else {
+      if (partOf(sim, b.plus) == s) {
+        w.J6.setZero();
+        pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.plus], at_plus, pinocchio::LOCAL_WORLD_ALIGNED, w.J6);
+        w.Jrel += w.J6.topRows<3>();
+      }
+      if (partOf(sim, b.minus) == s) {
+        w.J6.setZero();
+        pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.minus], at_minus, pinocchio::LOCAL_WORLD_ALIGNED,
+                                    w.J6);
+        w.Jrel -= w.J6.topRows<3>();
+      }
     }
     const int lr = sd.part_fill[s];
     sd.part_fill[s] += k;
@@ -104,6 +123,13 @@ Eigen::Vector3d pointAcceleration(const SimulatorModel& sim, SimulatorData& sd, 
                                   const pinocchio::SE3& at) {
   if (j == 0) return Eigen::Vector3d::Zero();
   const int s = sim.joint_system[j];
+  if (sim.systems[s].free_body) {
+    // a free flyer at zero acceleration: R (omega x (v + omega x r)), its velocity in its own frame
+    const pinocchio::Motion& vj = sd.parts[s].data.v[1];
+    const Eigen::Vector3d r = at.translation();
+    const Eigen::Vector3d v_point = vj.linear() + vj.angular().cross(r);
+    return sd.parts[s].data.oMi[1].rotation() * vj.angular().cross(v_point);
+  }
   return pinocchio::getFrameClassicalAcceleration(sim.systems[s].model, sd.parts[s].data, sim.joint_local[j], at,
                                                   pinocchio::LOCAL_WORLD_ALIGNED)
       .linear();
