@@ -57,8 +57,10 @@ SparseDelassus::SparseDelassus(Matrix A, bool symmetric) : A_(std::move(A)), sym
     throw std::invalid_argument("Delassus matrix A must be square, got " + std::to_string(A_.rows()) + "x" +
                                 std::to_string(A_.cols()));
   A_.makeCompressed();
-  abs_ = A_;  // same pattern; |values| in place (cheaper than Eigen's generic A_.cwiseAbs())
-  for (Eigen::Index k = 0; k < abs_.nonZeros(); ++k) abs_.valuePtr()[k] = std::abs(abs_.valuePtr()[k]);
+  if (!symmetric_) {  // (a symmetric A's products take |A| entry by entry: absMultiply)
+    abs_ = A_;  // same pattern; |values| in place (cheaper than Eigen's generic A_.cwiseAbs())
+    for (Eigen::Index k = 0; k < abs_.nonZeros(); ++k) abs_.valuePtr()[k] = std::abs(abs_.valuePtr()[k]);
+  }
   diagonal_ = A_.diagonal();
   std::vector<Eigen::Index> per_row(static_cast<std::size_t>(A_.rows()), 0);
   for (Eigen::Index k = 0; k < A_.nonZeros(); ++k) ++per_row[A_.innerIndexPtr()[k]];
@@ -126,7 +128,8 @@ bool SparseDelassus::assignValues(const Matrix& A) {
       !std::equal(A.innerIndexPtr(), A.innerIndexPtr() + nnz, A_.innerIndexPtr()))
     return false;
   std::copy(A.valuePtr(), A.valuePtr() + nnz, A_.valuePtr());
-  for (Eigen::Index k = 0; k < nnz; ++k) abs_.valuePtr()[k] = std::abs(A_.valuePtr()[k]);
+  if (!symmetric_)
+    for (Eigen::Index k = 0; k < nnz; ++k) abs_.valuePtr()[k] = std::abs(A_.valuePtr()[k]);
   diagonal_ = A_.diagonal();
   return true;
 }

@@ -139,7 +139,7 @@ class SparseDelassus final : public DelassusOperator {
 
  private:
   Matrix A_;
-  Matrix abs_;  // |A|, for the rounding bound
+  Matrix abs_;  // |A|, for the rounding bound (a non-symmetric A only)
   Eigen::VectorXd diagonal_;  // computed once (a sparse diagonal is a search per column)
   Eigen::Index max_row_entries_ = 0;  // the pattern's fullest row
   bool symmetric_ = false;
