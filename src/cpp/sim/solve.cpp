@@ -103,6 +103,7 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     sd.problem->setB(sd.b_scaled);
   }
   SolverSettings settings = sim.settings.solver_settings;
+  const bool exact = sd.solver->exactLaw();
   sd.guess.resize(rows);
   bool any = false;
   Eigen::Index row = 0;
@@ -116,7 +117,8 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
       // them: they lie in A's null space). Its guess starts without them, inside the cone, so the
       // solver's sticking step applies (docs/solvers.md); the part of the friction the body needs is
       // in A's range and comes back with the first step.
-      if (k > 1 && sd.candidate_states[i] == ContactState::kStick) {
+      // (The exact law's cone only: the other formulations keep their guess as it was.)
+      if (exact && k > 1 && sd.candidate_states[i] == ContactState::kStick) {
         const auto tangent = sd.guess.segment(row, k - 1);
         if (tangent.norm() >= (1.0 - kBoundaryMargin) * candidateMu(sim, i) * sd.guess[row + k - 1])
           sd.guess.segment(row, k - 1).setZero();
@@ -131,7 +133,6 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     any = any || sd.anchor_lambda.col(a).squaredNorm() > 0.0;
   }
   settings.warm_start = sim.settings.warm_start && any ? WarmStart::kGiven : WarmStart::kNone;
-  const bool exact = sd.solver->exactLaw();
   if (!exact) {  // what the other formulations may know of the step (formulation.hpp)
     StepContext context;
     context.h = scale;
