@@ -93,3 +93,47 @@ def test_the_rounding_bound_of_a_sparse_product_counts_its_row_not_its_size():
     assert rs.converged and rd.converged
     np.testing.assert_allclose(rs.lam, rd.lam, rtol=1e-8, atol=1e-12 * np.abs(rd.lam).max())
     assert rs.residual_bound == pytest.approx(rd.residual_bound * (12 + 2) / (72 + 2), rel=0.05)
+
+
+def bodies_and_contacts(rng, bodies: int, contacts: int, layout: str):
+    """A = J M^-1 J^T for free bodies (6 dofs, random SPD mass) and spatial contacts: a "chain"
+    (a tower: contacts between body k and k + 1, listed bottom to top, the order a tower's are in)
+    or "random" pairs (and some bodies on the ground) in no order. More contact rows than dofs: A is
+    rank-deficient, as a tower's."""
+    M_inv = [np.linalg.inv(spd(rng, 6, cond=50.0)) for _ in range(bodies)]
+    if layout == "chain":
+        pairs = [(c * (bodies - 1) // contacts, c * (bodies - 1) // contacts + 1) for c in range(contacts)]
+    else:
+        pairs = [tuple(rng.choice(bodies, size=2 if rng.random() < 0.7 else 1, replace=False)) for _ in range(contacts)]
+    J = np.zeros((3 * contacts, 6 * bodies))
+    for c, pair in enumerate(pairs):
+        for body in pair:
+            J[3 * c:3 * c + 3, 6 * body:6 * body + 6] = rng.standard_normal((3, 6))
+    A = J @ sp.block_diag(M_inv).toarray() @ J.T
+    return 0.5 * (A + A.T)
+
+
+def spd(rng, n, cond):
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    return (Q * np.geomspace(1.0, 1.0 / cond, n)) @ Q.T
+
+
+@pytest.mark.parametrize("layout", ["chain", "random"])
+def test_the_sticking_step_factors_a_sparse_operator_in_contact_blocks(layout):
+    """A sparse operator of spatial contacts is factored in 3 x 3 blocks (block_cholesky.hpp), in
+    the contacts' own order (the chain's) or an AMD order of the block graph: one refinement step with that
+    factor takes a warm start inside the cones to A lambda = b (checked here by numpy) — a factor
+    off by more than rounding would need more steps or leave the sticking step."""
+    rng = np.random.default_rng(7)
+    A = bodies_and_contacts(rng, bodies=40, contacts=120, layout=layout)
+    mu = 0.5
+    lam_n = rng.uniform(1.0, 2.0, 120)
+    angle = rng.uniform(0.0, 2 * np.pi, 120)
+    lam_star = np.stack([0.3 * mu * lam_n * np.cos(angle), 0.3 * mu * lam_n * np.sin(angle), lam_n], axis=1).ravel()
+    b = A @ lam_star
+    problem = _core.ContactProblem(sp.csc_matrix(A), b, [_core.Constraint.spatial_friction(mu)] * 120)
+    assert problem.is_sparse
+    guess = lam_star + 1e-3 * rng.standard_normal(lam_star.size)  # inside the cones still
+    r = stiction.solve(problem, warm_start=guess, tol=1e-10)
+    assert r.converged and [s.name for s in r.stages] == ["sticking step"] and r.iterations == 1, r.stages
+    assert np.linalg.norm(A @ r.lam - b) <= 1e-10 * np.linalg.norm(b)

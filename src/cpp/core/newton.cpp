@@ -261,14 +261,22 @@ bool DefaultSolver::factorShifted(const ContactProblem& problem, double shift) {
                       std::equal(stick_inner_.begin(), stick_inner_.end(), S->innerIndexPtr());
     if (!same) {
       if (!S->isCompressed()) return false;
-      stick_sparse_llt_.analyzePattern(*S);
-      stick_natural_llt_.analyzePattern(*S);
-      // the symbolic analysis sizes L exactly: compare the fills
-      stick_natural_ = stick_natural_llt_.matrixL().nestedExpression().nonZeros() <=
-                       stick_sparse_llt_.matrixL().nestedExpression().nonZeros() * 11 / 10;
+      // spatial contacts only: factored in their 3 x 3 blocks (block_cholesky.hpp)
+      const auto& offsets = problem.offsets();
+      bool spatial = m % 3 == 0;
+      for (std::size_t i = 0; spatial && i + 1 < offsets.size(); ++i) spatial = offsets[i + 1] - offsets[i] == 3;
+      stick_blocked_ = spatial && stick_block_.analyze(*S);
+      if (!stick_blocked_) {
+        stick_sparse_llt_.analyzePattern(*S);
+        stick_natural_llt_.analyzePattern(*S);
+        // the symbolic analysis sizes L exactly: compare the fills
+        stick_natural_ = stick_natural_llt_.matrixL().nestedExpression().nonZeros() <=
+                         stick_sparse_llt_.matrixL().nestedExpression().nonZeros() * 11 / 10;
+      }
       stick_outer_.assign(S->outerIndexPtr(), S->outerIndexPtr() + m + 1);
       stick_inner_.assign(S->innerIndexPtr(), S->innerIndexPtr() + nnz);
     }
+    if (stick_blocked_) return stick_block_.factorize(*S, shift);
     if (stick_natural_) {
       stick_natural_llt_.setShift(shift);
       stick_natural_llt_.factorize(*S);
@@ -375,6 +383,8 @@ bool DefaultSolver::stickingStep(const ContactProblem& problem, Eigen::VectorXd&
 void DefaultSolver::solveShifted(const Eigen::VectorXd& rhs, Eigen::VectorXd& x) const {
   if (!stick_sparse_path_)
     x = stick_llt_.solve(rhs);
+  else if (stick_blocked_)
+    stick_block_.solve(rhs, x);
   else if (stick_natural_)
     x = stick_natural_llt_.solve(rhs);
   else

@@ -16,6 +16,7 @@
 #include <Eigen/SparseCholesky>
 
 #include "stiction/admm.hpp"
+#include "stiction/block_cholesky.hpp"
 #include "stiction/nsgs.hpp"
 #include "stiction/solver.hpp"
 
@@ -119,6 +120,8 @@ class DefaultSolver final : public ContactSolver {
   // a permuted one; A is stored whole and symmetric, so both triangles hold it.)
   Eigen::SimplicialLLT<Eigen::SparseMatrix<double>, Eigen::Upper, Eigen::NaturalOrdering<int>> stick_natural_llt_;
   bool stick_natural_ = false;
+  BlockCholesky3 stick_block_;  // spatial contacts only: L in 3 x 3 blocks
+  bool stick_blocked_ = false;
   Eigen::SparseMatrix<double> stick_sparse_;              // a dense A's entries, when sparse enough
   std::vector<int> stick_outer_, stick_inner_;            // the pattern analysed last
   bool stick_sparse_path_ = false;
