@@ -344,3 +344,34 @@ def test_recording_a_world_of_many_bodies(tmp_path):
     assert info["frames"] == 3  # 0, 20 and 40 ms at 50 fps
     assert info["tracks"] == 256 + 3 * 1024
     assert info["force_scale"] > 0
+
+
+def test_a_gap_within_its_rounding_enters_b_as_zero():
+    """A 64-box tower (6.4 m): the box-box gaps coal reports at the top are a unit roundoff of the
+    positions (~1e-15 m), different corner by corner, which no motion of the boxes fits. Psi takes
+    them as zero (the reported gaps keep them), so b lies in A's range and every step converges to
+    1e-10 ||b||; a gap above that rounding (a box lifted 1e-9 m) is kept."""
+    from stiction.scene import build_scene
+
+    sim = Simulator(build_scene({"name": "tower-64", "array": {"layout": "tower", "count": 64}, "ground": {"mu": 0.5}}))
+    traj = sim.rollout(0.1)
+    assert traj.converged.all(), np.flatnonzero(~traj.converged)
+    d = sim.data
+    rows, active = np.asarray(d.rows), np.asarray(d.active)
+    normal = np.cumsum([rows[i] for i in active]) - 1  # each active contact's normal row
+    gaps, psi = np.asarray(d.gaps)[active], np.asarray(d.position_error)[normal]
+    noisy = (gaps != 0.0) & (np.abs(gaps) < 1e-14)
+    assert noisy.sum() >= 8, gaps  # the rounding this is about
+    assert (psi[noisy] == 0.0).all()
+    # b's part outside the range of J (A's range): none beyond the products' rounding
+    J, b = np.asarray(d.J), np.asarray(d.b)
+    coef, *_ = np.linalg.lstsq(J, b, rcond=None)
+    assert np.linalg.norm(b - J @ coef) <= 1e-12 * np.linalg.norm(b)
+
+    lifted = Simulator(build_scene({"name": "box", "array": {"layout": "tower", "count": 1}, "ground": {"mu": 0.5}}))
+    q = np.array(lifted.data.q)
+    q[2] += 1e-9
+    lifted.data.q = q
+    lifted.step()
+    ld = lifted.data
+    np.testing.assert_allclose(np.asarray(ld.position_error)[2::3], 1e-9, rtol=1e-6)
