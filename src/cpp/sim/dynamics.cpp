@@ -4,6 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
 
 #include <pinocchio/algorithm/cholesky.hpp>
 #include <pinocchio/algorithm/crba.hpp>
@@ -124,18 +125,44 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
   }
 }
 
-void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
-  // A = sum over parts of (D^-1/2 U^-1 J_s^T)^T (D^-1/2 U^-1 J_s^T): symmetric by construction.
+namespace {
+
+// A part's share of A, dense: A_s = W_s^T W_s (W_s: its scaled rows, delassusFactors).
+void partOperator(SystemWork& w) {
+  const auto n = static_cast<Eigen::Index>(w.rows.size());
+  w.A.resize(n, n);
+  if (n == 0) return;
+  if (w.W.rows() == 6) {
+    // a free body's contacts (a cube's 4 corners: 12 rows x 6; a tower's box, 24): one fixed-size
+    // 6-term dot product per entry of the lower triangle, mirrored (exactly symmetric; Eigen's
+    // dynamic-size coefficient-wise product spent most of its time in loop set-up at this size)
+    const Eigen::Map<const Eigen::Matrix<double, 6, Eigen::Dynamic>> W6(w.W.data(), 6, n);
+    for (Eigen::Index c = 0; c < n; ++c) {
+      const Eigen::Matrix<double, 6, 1> wc = W6.col(c);
+      for (Eigen::Index r = c; r < n; ++r) w.A(r, c) = w.A(c, r) = W6.col(r).dot(wc);
+    }
+  } else if (w.W.rows() <= 6) {
+    // (robots keep the rank update below: TALOS's 24 x 44 was 5 us slower coefficient-wise)
+    w.A.noalias() = w.W.transpose().lazyProduct(w.W);
+  } else {
+    w.A.setZero();
+    w.A.selfadjointView<Eigen::Lower>().rankUpdate(w.W.transpose());
+    w.A.triangularView<Eigen::StrictlyUpper>() = w.A.transpose();
+  }
+}
+
+// W_s = D^-1/2 U^-1 J_s^T for every part, so that A = sum_s W_s^T W_s (symmetric by construction);
+// returns the entries of the parts' dense shares, sum of n_s^2.
+Eigen::Index delassusFactors(SimulatorData& sd) {
   // (dense triangular solve: cheaper than Pinocchio's per-column Uiv at these sizes)
-  const Eigen::Index rows = sd.rows;
   Eigen::Index entries = 0;
   for (SystemWork& w : sd.parts) {
     const auto n = static_cast<Eigen::Index>(w.rows.size());
-    w.A.resize(n, n);
+    entries += n * n;
     if (n == 0) continue;
     if (w.J.cols() > 6 && contactSupport(w.data, w)) {
       // A robot touching with a few limbs (TALOS's two soles: base and legs, 18 of 38
-      // coordinates): the triangular solve and the rank update on those coordinates only.
+      // coordinates): the triangular solve on those coordinates only.
       const auto s = static_cast<Eigen::Index>(w.support.size());
       w.U_support.resize(s, s);
       w.W.resize(s, n);
@@ -147,10 +174,7 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
       w.U_support.diagonal().setOnes();
       w.U_support.triangularView<Eigen::UnitUpper>().solveInPlace(w.W);
       for (Eigen::Index c = 0; c < s; ++c) w.W.row(c) *= std::sqrt(w.data.Dinv[w.support[c]]);
-      w.A.setZero();
-      w.A.selfadjointView<Eigen::Lower>().rankUpdate(w.W.transpose());
-      w.A.triangularView<Eigen::StrictlyUpper>() = w.A.transpose();
-      entries += n * n;
+      // (W has more rows than 6: partOperator's rank update, as for any robot)
       continue;
     }
     w.W = w.J.transpose();
@@ -165,30 +189,164 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
       w.data.U.triangularView<Eigen::UnitUpper>().solveInPlace(w.W);
     }
     w.W = w.data.Dinv.cwiseSqrt().asDiagonal() * w.W;
-    if (w.W.rows() == 6) {
-      // a free body's contacts (a cube's 4 corners: 12 rows x 6; a tower's box, 24): one fixed-size
-      // 6-term dot product per entry of the lower triangle, mirrored (exactly symmetric; Eigen's
-      // dynamic-size coefficient-wise product spent most of its time in loop set-up at this size)
-      const Eigen::Map<const Eigen::Matrix<double, 6, Eigen::Dynamic>> W6(w.W.data(), 6, n);
-      for (Eigen::Index c = 0; c < n; ++c) {
-        const Eigen::Matrix<double, 6, 1> wc = W6.col(c);
-        for (Eigen::Index r = c; r < n; ++r) w.A(r, c) = w.A(c, r) = W6.col(r).dot(wc);
-      }
-    } else if (w.J.cols() <= 6) {
-      // (robots keep the rank update below: TALOS's 24 x 44 was 5 us slower coefficient-wise)
-      w.A.noalias() = w.W.transpose().lazyProduct(w.W);
-    } else {
-      w.A.setZero();
-      w.A.selfadjointView<Eigen::Lower>().rankUpdate(w.W.transpose());
-      w.A.triangularView<Eigen::StrictlyUpper>() = w.A.transpose();
-    }
-    entries += n * n;
   }
+  return entries;
+}
+
+// The sparse A's values straight from the parts' W (the plan, sd.assembly, listed when the pattern
+// was last assembled): each block of the lower triangle (a pair of contacts, or anchors) is the
+// product of its two blocks' columns of W in the one or two parts both belong to, written with its
+// mirror, three values at a time. (The parts' dense shares summed into place entry by entry cost
+// twice that: a quarter of a 256-contact tower's step went to the scattered sums.)
+void assembleFromPlan(SimulatorData& sd) {
+  double* value = sd.A_sparse.valuePtr();
+  sd.part_w.resize(sd.parts.size());
+  for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.part_w[s] = sd.parts[s].W.data();
+  const auto dot6 = [](const double* a, const double* b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5];
+  };
+  double block[9];  // column-major 3 x 3
+  for (const AssemblyBlock& e : sd.assembly) {
+    const int ki = e.rows, kj = e.cols;
+    if (e.free_bodies) {  // free bodies' spatial contacts: W has 6 rows, blocks are 3 x 3
+      const double* wi = sd.part_w[static_cast<std::size_t>(e.part[0])] + 6 * e.row[0];
+      const double* wj = sd.part_w[static_cast<std::size_t>(e.part[0])] + 6 * e.col[0];
+      for (int c = 0; c < 3; ++c)
+        for (int r = 0; r < 3; ++r) block[r + 3 * c] = dot6(wi + 6 * r, wj + 6 * c);
+      if (e.part[1] >= 0) {
+        wi = sd.part_w[static_cast<std::size_t>(e.part[1])] + 6 * e.row[1];
+        wj = sd.part_w[static_cast<std::size_t>(e.part[1])] + 6 * e.col[1];
+        for (int c = 0; c < 3; ++c)
+          for (int r = 0; r < 3; ++r) block[r + 3 * c] += dot6(wi + 6 * r, wj + 6 * c);
+      }
+    } else {
+      for (int p = 0; p < 2 && e.part[p] >= 0; ++p) {
+        const Eigen::MatrixXd& W = sd.parts[static_cast<std::size_t>(e.part[p])].W;
+        for (int c = 0; c < kj; ++c)
+          for (int r = 0; r < ki; ++r) {
+            const double d = W.col(e.row[p] + r).dot(W.col(e.col[p] + c));
+            block[r + 3 * c] = p == 0 ? d : block[r + 3 * c] + d;
+          }
+      }
+    }
+    for (int c = 0; c < kj; ++c)
+      for (int r = 0; r < ki; ++r) value[e.position[c] + r] = block[r + 3 * c];
+    if (e.mirror[0] >= 0)
+      for (int r = 0; r < ki; ++r)
+        for (int c = 0; c < kj; ++c) value[e.mirror[r] + c] = block[r + 3 * c];
+  }
+}
+
+// The plan of assembleFromPlan for A_sparse's pattern just built: the blocks are the active
+// contacts' rows, then the anchors' (3 each). False when a block pair has more than two shares
+// (blocks in more than two parts: not a contact's) or a block is wider than 3 rows.
+bool planAssembly(const SimulatorModel& sim, SimulatorData& sd) {
+  const Eigen::Index rows = sd.rows;
+  std::vector<int> block_of(static_cast<std::size_t>(rows)), start;  // each row's block; each block's first row
+  int row = 0;
+  for (int i : sd.active) {
+    start.push_back(row);
+    row += sd.candidate_rows[i];
+  }
+  for (std::size_t a = 0; a < sim.anchors.size(); ++a, row += 3) start.push_back(row);
+  start.push_back(row);
+  if (row != rows) return false;
+  const auto blocks = static_cast<int>(start.size()) - 1;
+  for (int b = 0; b < blocks; ++b) {
+    if (start[b + 1] - start[b] > 3) return false;
+    for (int r = start[b]; r < start[b + 1]; ++r) block_of[static_cast<std::size_t>(r)] = b;
+  }
+  const int* outer = sd.A_sparse.outerIndexPtr();
+  const int* inner = sd.A_sparse.innerIndexPtr();
+  auto position = [&](int r, int c) {
+    return static_cast<int>(std::lower_bound(inner + outer[c], inner + outer[c + 1], r) - inner);
+  };
+  std::unordered_map<long long, int> index;  // (block i, block j) -> its entry
+  sd.assembly.clear();
+  for (std::size_t s = 0; s < sd.parts.size(); ++s) {
+    const std::vector<int>& part_rows = sd.parts[s].rows;
+    // the part's blocks and the local row each starts at (a block's rows are all in its parts)
+    std::vector<std::pair<int, int>> part_blocks;
+    for (std::size_t k = 0; k < part_rows.size(); ++k)
+      if (part_rows[k] == start[static_cast<std::size_t>(block_of[static_cast<std::size_t>(part_rows[k])])])
+        part_blocks.emplace_back(block_of[static_cast<std::size_t>(part_rows[k])], static_cast<int>(k));
+    for (const auto& [bj, lj] : part_blocks)
+      for (const auto& [bi, li] : part_blocks) {
+        if (bi < bj) continue;  // the lower triangle; the mirror takes the rest
+        const long long key = static_cast<long long>(bi) * blocks + bj;
+        auto [it, fresh] = index.emplace(key, static_cast<int>(sd.assembly.size()));
+        if (fresh) {
+          AssemblyBlock e;
+          e.rows = start[static_cast<std::size_t>(bi) + 1] - start[static_cast<std::size_t>(bi)];
+          e.cols = start[static_cast<std::size_t>(bj) + 1] - start[static_cast<std::size_t>(bj)];
+          for (int c = 0; c < e.cols; ++c) e.position[c] = position(start[bi], start[bj] + c);
+          if (bi != bj)
+            for (int r = 0; r < e.rows; ++r) e.mirror[r] = position(start[bj], start[bi] + r);
+          e.part[0] = static_cast<int>(s);
+          e.row[0] = li;
+          e.col[0] = lj;
+          e.free_bodies = e.rows == 3 && e.cols == 3 && sim.systems[s].free_body;
+          sd.assembly.push_back(e);
+        } else {
+          AssemblyBlock& e = sd.assembly[static_cast<std::size_t>(it->second)];
+          if (e.part[1] >= 0) return false;
+          e.part[1] = static_cast<int>(s);
+          e.row[1] = li;
+          e.col[1] = lj;
+          e.free_bodies = e.free_bodies && sim.systems[s].free_body;
+        }
+      }
+  }
+  return true;
+}
+
+}  // namespace
+
+void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
+  const Eigen::Index rows = sd.rows;
+  const Eigen::Index entries = delassusFactors(sd);
   // Sparse when the parts leave most of A empty: many parts, more rows than the dense
   // solvers handle well (the default rule's threshold), at most 25 % of the entries (a tower's
   // block-tridiagonal A is 14-20 %).
   sd.sparse = sd.parts.size() > 1 && rows > kSparseDelassusRows && entries * 4 <= rows * rows;
-  if (sd.sparse && !sd.parts_share_rows) {
+  if (sd.sparse && sd.parts_share_rows) {  // rows shared by two parts (contacts between bodies)
+    // While the entries' (row, column) sequence is last step's (the same contacts on the same
+    // rows), A's pattern and the plan of its entries hold: the values are computed in place
+    // (setFromTriplets was a third of a tower's step).
+    const auto count = static_cast<std::size_t>(entries);
+    bool same = sd.assembly_valid && sd.A_sparse.rows() == rows && sd.triplet_position.size() == count &&
+                sd.triplets.size() == count && sd.triplet_part_rows.size() == sd.parts.size();
+    for (std::size_t s = 0; same && s < sd.parts.size(); ++s) same = sd.parts[s].rows == sd.triplet_part_rows[s];
+    if (same) {
+      assembleFromPlan(sd);
+      sd.A.resize(0, 0);
+      return;
+    }
+    for (SystemWork& w : sd.parts) partOperator(w);
+    sd.triplets.clear();
+    sd.triplets.reserve(count);
+    for (const SystemWork& w : sd.parts)
+      for (Eigen::Index c = 0; c < w.A.cols() && !w.rows.empty(); ++c)
+        for (Eigen::Index r = 0; r < w.A.rows(); ++r) sd.triplets.emplace_back(w.rows[r], w.rows[c], w.A(r, c));
+    sd.triplet_part_rows.resize(sd.parts.size());
+    for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.triplet_part_rows[s] = sd.parts[s].rows;
+    sd.A_sparse.resize(rows, rows);
+    sd.A_sparse.setFromTriplets(sd.triplets.begin(), sd.triplets.end());
+    sd.A_sparse.makeCompressed();
+    // each entry's position in the compressed storage (a search in its column)
+    sd.triplet_position.resize(count);
+    const int* outer = sd.A_sparse.outerIndexPtr();
+    const int* inner = sd.A_sparse.innerIndexPtr();
+    for (std::size_t t = 0; t < count; ++t) {
+      const int row = sd.triplets[t].row(), col = sd.triplets[t].col();
+      sd.triplet_position[t] = static_cast<int>(std::lower_bound(inner + outer[col], inner + outer[col + 1], row) - inner);
+    }
+    sd.assembly_valid = planAssembly(sim, sd);
+    sd.A.resize(0, 0);
+    return;
+  }
+  for (SystemWork& w : sd.parts) partOperator(w);
+  if (sd.sparse) {
     // Every row in one part: column c of A is its part's column, rows in the part's (ascending)
     // order; written straight into the compressed storage.
     sd.row_part.assign(static_cast<std::size_t>(rows), -1);
@@ -216,48 +374,6 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
         }
       }
       outer[c + 1] = static_cast<int>(pos);
-    }
-    sd.A.resize(0, 0);
-    return;
-  }
-  if (sd.sparse) {  // rows shared by two parts (contacts between bodies): their shares summed
-    // While the entries' (row, column) sequence is last step's (the same contacts on the same
-    // rows), their positions in A_sparse are known: the shares are summed in place rather than
-    // sorted again (setFromTriplets was a third of a tower's step).
-    // (The entries are listed part by part, column by column from each part's rows: the same rows
-    // per part, the same sequence.)
-    const auto count = static_cast<std::size_t>(entries);
-    bool same = sd.A_sparse.rows() == rows && sd.triplet_position.size() == count && sd.triplets.size() == count &&
-                sd.triplet_part_rows.size() == sd.parts.size();
-    for (std::size_t s = 0; same && s < sd.parts.size(); ++s) same = sd.parts[s].rows == sd.triplet_part_rows[s];
-    std::size_t k = 0;
-    if (same) {
-      double* value = sd.A_sparse.valuePtr();
-      std::fill(value, value + sd.A_sparse.nonZeros(), 0.0);
-      k = 0;
-      for (const SystemWork& w : sd.parts)
-        for (Eigen::Index c = 0; c < w.A.cols() && !w.rows.empty(); ++c)
-          for (Eigen::Index r = 0; r < w.A.rows(); ++r, ++k) value[sd.triplet_position[k]] += w.A(r, c);
-      sd.A.resize(0, 0);
-      return;
-    }
-    sd.triplets.clear();
-    sd.triplets.reserve(count);
-    for (const SystemWork& w : sd.parts)
-      for (Eigen::Index c = 0; c < w.A.cols() && !w.rows.empty(); ++c)
-        for (Eigen::Index r = 0; r < w.A.rows(); ++r) sd.triplets.emplace_back(w.rows[r], w.rows[c], w.A(r, c));
-    sd.triplet_part_rows.resize(sd.parts.size());
-    for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.triplet_part_rows[s] = sd.parts[s].rows;
-    sd.A_sparse.resize(rows, rows);
-    sd.A_sparse.setFromTriplets(sd.triplets.begin(), sd.triplets.end());
-    sd.A_sparse.makeCompressed();
-    // each entry's position in the compressed storage (a search in its column)
-    sd.triplet_position.resize(count);
-    const int* outer = sd.A_sparse.outerIndexPtr();
-    const int* inner = sd.A_sparse.innerIndexPtr();
-    for (std::size_t t = 0; t < count; ++t) {
-      const int row = sd.triplets[t].row(), col = sd.triplets[t].col();
-      sd.triplet_position[t] = static_cast<int>(std::lower_bound(inner + outer[col], inner + outer[col + 1], row) - inner);
     }
     sd.A.resize(0, 0);
     return;

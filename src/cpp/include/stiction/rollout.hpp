@@ -14,8 +14,12 @@ namespace stiction {
 
 /// Every `every`-th state of a rollout (and the first), row per record.
 struct Recording {
+  /// One row per record: a step's values are contiguous (column-major, each record's values lay
+  /// a column's length apart: on a 256-contact tower's 2000-step rollout, writing them was 12 % of
+  /// the rollout).
+  using Rows = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   Eigen::VectorXd t, residual, iterations, converged, dt;
-  Eigen::MatrixXd q, v, lam, contact_velocity, gaps, states, rows, anchor_lam, timings;
+  Rows q, v, lam, contact_velocity, gaps, states, rows, anchor_lam, timings;
   int records = 0;       ///< rows filled (fewer than allocated when the rollout stopped early)
   std::string error;     ///< why it stopped early (the step's exception), empty when it ran to the end
 

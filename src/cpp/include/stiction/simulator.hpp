@@ -179,6 +179,17 @@ struct StepTimings {
 
 /// The workspace of one part: its Pinocchio Data, its coordinates, and its columns of the
 /// contact Jacobian (the rows of the contacts that touch it).
+/// One block of the lower triangle of a sparse A shared by parts (two contacts' rows, or anchors'),
+/// and where its columns and its mirror's start in the compressed storage (each column's `rows`
+/// values are consecutive there): the sum over its one or two parts s of W_s's columns
+/// [row, row + rows) transposed times [col, col + cols) (part -1: none; mirror -1: a diagonal block).
+struct AssemblyBlock {
+  int rows = 0, cols = 0;
+  int position[3] = {0, 0, 0}, mirror[3] = {-1, -1, -1};
+  int part[2] = {-1, -1}, row[2] = {0, 0}, col[2] = {0, 0};
+  bool free_bodies = false;  ///< 3 x 3 between free bodies (W: 6 rows in each part): the fixed-size path
+};
+
 struct SystemWork {
   explicit SystemWork(const SystemModel& s);
 
@@ -271,6 +282,9 @@ class SimulatorData {
   std::vector<Eigen::Triplet<double>> triplets;  ///< the sparse A's entries, part by part, as last assembled
   std::vector<int> triplet_position;  ///< where each sits in A_sparse's compressed storage
   std::vector<std::vector<int>> triplet_part_rows;  ///< each part's rows when the triplets were listed
+  std::vector<AssemblyBlock> assembly;  ///< the sparse A's lower triangle, block by block, from the parts' W
+  bool assembly_valid = false;          ///< `assembly` lists the triplets' pattern
+  std::vector<const double*> part_w;    ///< each part's W (assembleFromPlan's workspace)
   bool parts_share_rows = false;  ///< a contact between two parts: its rows in both
   std::vector<int> row_part, row_local;  ///< per row: its part and local row (rows in one part each)
   Eigen::VectorXd row_scratch;  ///< one value per row
