@@ -34,7 +34,7 @@ def test_normal_is_moved_last():
     the normal rows of b are the FCLib normal entries negated."""
     P = fclib.load(FCLIB_DIR / "Toy--FrictionContact3D_1c.dat")
 
-    tokens = open(FCLIB_DIR / "Toy--FrictionContact3D_1c.dat").read().split()
+    tokens = (FCLIB_DIR / "Toy--FrictionContact3D_1c.dat").read_text().split()
     # dense 3x3 after "3 1 0 3 3 3 3": column-major W, then q (3), then mu
     values = [float(t) for t in tokens[7:7 + 9 + 3]]
     W = np.array(values[:9]).reshape(3, 3, order="F")

@@ -94,6 +94,26 @@ void SparseDelassus::absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eig
   }
 }
 
+// One pass over A for both (the verdict's bound follows the product that gave u).
+void SparseDelassus::multiplyWithAbs(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y,
+                                     Eigen::Ref<Eigen::VectorXd> y_abs) const {
+  if (!symmetric_) {
+    multiply(x, y);
+    absMultiply(x, y_abs);
+    return;
+  }
+  for (Eigen::Index j = 0; j < A_.cols(); ++j) {
+    double sum = 0.0, abs_sum = 0.0;
+    for (Matrix::InnerIterator it(A_, j); it; ++it) {
+      const double a = it.value(), xi = x[it.row()];
+      sum += a * xi;
+      abs_sum += std::abs(a) * std::abs(xi);
+    }
+    y[j] = sum;
+    y_abs[j] = abs_sum;
+  }
+}
+
 void SparseDelassus::addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,
                                          const Eigen::Ref<const Eigen::VectorXd>& dx,
                                          Eigen::Ref<Eigen::VectorXd> y) const {

@@ -299,12 +299,13 @@ bool DefaultSolver::stickingStep(const ContactProblem& problem, Eigen::VectorXd&
   StoppingTest test(problem, tolerance);
   stick_x_ = lam;
   stick_u_.resize(lam.size());
+  stick_abs_.resize(lam.size());
   stick_w_.resize(lam.size());
-  A.multiply(stick_x_, stick_u_);
+  A.multiplyWithAbs(stick_x_, stick_u_, stick_abs_);
   stick_u_ -= problem.b();
   const double initial_map = naturalMapNorm(problem, stick_x_, stick_u_);
   // the guess may be the answer already (a scene at rest whose A and b did not change)
-  StoppingTest::Outcome outcome = test.check(stick_x_, stick_u_, initial_map, /*u_is_fresh=*/true);
+  StoppingTest::Outcome outcome = test.check(stick_x_, stick_u_, initial_map, /*u_is_fresh=*/true, &stick_abs_);
   if (outcome == StoppingTest::kConverged) return true;
   stick_diagonal_.resize(lam.size());
   A.diagonal(stick_diagonal_);
@@ -327,11 +328,11 @@ bool DefaultSolver::stickingStep(const ContactProblem& problem, Eigen::VectorXd&
       solveShifted(stick_w_, stick_d_);
       ++solves;
       stick_x_ -= stick_d_;
-      A.multiply(stick_x_, stick_u_);
+      A.multiplyWithAbs(stick_x_, stick_u_, stick_abs_);
       stick_u_ -= problem.b();
       natural_map = naturalMapNorm(problem, stick_x_, stick_u_);
       if (first_map < 0.0) first_map = natural_map;
-      outcome = test.check(stick_x_, stick_u_, natural_map, /*u_is_fresh=*/true);
+      outcome = test.check(stick_x_, stick_u_, natural_map, /*u_is_fresh=*/true, &stick_abs_);
       if (outcome == StoppingTest::kConverged) return 1;
       // a contact that should open or slip: the all-stick point leaves the cones and the natural
       // map stops falling

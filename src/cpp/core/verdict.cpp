@@ -159,7 +159,7 @@ namespace {
 // The measures, computed (measureVerdict adds a cache in front).
 void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
                             VerdictMeasures& out, double decisive, bool per_block, const Eigen::VectorXd* fresh_u,
-                            Eigen::VectorXd& ud) {
+                            const Eigen::VectorXd* fresh_abs, Eigen::VectorXd& ud) {
   using VectorExt = Eigen::Matrix<Extended, Eigen::Dynamic, 1>;
   // Workspace reused across calls (a verdict per simulator step: no allocation once sized).
   thread_local Eigen::VectorXd abs_product, du;
@@ -168,8 +168,12 @@ void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<cons
   const Eigen::Index m = problem.numRows();
   block_bound.resize(problem.numBlocks());
   // |A||lambda| (in double, inflated by its own rounding: it is only a bound)
-  abs_product.resize(m);
-  problem.delassus().absMultiply(lam, abs_product);
+  if (fresh_u != nullptr && fresh_abs != nullptr && fresh_abs->size() == m) {
+    abs_product = *fresh_abs;
+  } else {
+    abs_product.resize(m);
+    problem.delassus().absMultiply(lam, abs_product);
+  }
   // A row of A lambda sums at most `terms` products (a sparse A: its fullest row, not m): the
   // worst-case rounding bound gamma_terms of every product below.
   const double terms = static_cast<double>(problem.delassus().maxRowEntries());
@@ -230,7 +234,8 @@ bool lastVerdictResidual(const ContactProblem& problem, const Eigen::Ref<const E
 }
 
 void measureVerdict(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
-                    VerdictMeasures& out, double decisive, bool per_block, const Eigen::VectorXd* fresh_u) {
+                    VerdictMeasures& out, double decisive, bool per_block, const Eigen::VectorXd* fresh_u,
+                    const Eigen::VectorXd* fresh_abs) {
   VerdictCache& cache = last_verdict;
   if (!per_block && cache.problem == &problem && cache.decisive == decisive && cache.lam.size() == lam.size() &&
       cache.lam == lam) {
@@ -239,7 +244,7 @@ void measureVerdict(const ContactProblem& problem, const Eigen::Ref<const Eigen:
     out.floor = cache.out.floor;
     return;
   }
-  measureVerdictUncached(problem, lam, out, decisive, per_block, fresh_u, cache.u);
+  measureVerdictUncached(problem, lam, out, decisive, per_block, fresh_u, fresh_abs, cache.u);
   cache.problem = &problem;
   cache.lam = lam;
   cache.decisive = decisive;
@@ -323,9 +328,10 @@ StoppingTest::StoppingTest(const ContactProblem& problem, double tolerance)
     : problem_(problem), threshold_(tolerance * stoppingScale(problem)) {}
 
 StoppingTest::Outcome StoppingTest::check(const Eigen::Ref<const Eigen::VectorXd>& lam, const Eigen::VectorXd& u,
-                                          double natural_map, bool u_is_fresh) {
+                                          double natural_map, bool u_is_fresh, const Eigen::VectorXd* abs_product) {
   if (!(natural_map <= threshold_)) return kContinue;
-  measureVerdict(problem_, lam, measures_, threshold_, false, u_is_fresh ? &u : nullptr);
+  measureVerdict(problem_, lam, measures_, threshold_, false, u_is_fresh ? &u : nullptr,
+                 u_is_fresh ? abs_product : nullptr);
   if (measures_.natural_map + measures_.bound <= threshold_) return kConverged;
   if (measures_.floor > kFloorMargin * threshold_) return kUnresolvable;
   return kContinue;  // within reach: a little more accuracy is needed

@@ -399,7 +399,8 @@ void multiplyJacobian(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
     SystemWork& w = sd.parts[s];
     if (w.rows.empty()) continue;
     gatherV(sim.systems[s], x, w.x);
-    for (Eigen::Index r = 0; r < w.J.rows(); ++r) y[w.rows[r]] += w.J.row(r).dot(w.x);
+    w.row_values.noalias() = w.J * w.x;  // (J is stored by columns: a product, not a dot per row)
+    for (Eigen::Index r = 0; r < w.J.rows(); ++r) y[w.rows[r]] += w.row_values[r];
   }
 }
 
@@ -424,11 +425,11 @@ void solveJacobianTransposed(const SimulatorModel& sim, SimulatorData& sd, const
 void rightHandSide(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v, double delta, double zeta,
                    bool tangential_drift) {
   // eq. 27 with Phi = nle - tau: b = J M^-1 Phi - J' v - (2 zeta / delta) J v - Psi / delta^2
-  multiplyJacobian(sim, sd, sd.v_free, sd.row_scratch);
+  // (J v_free and J v in one product: J (v_free + (2 zeta / delta) v))
+  sd.nv_scratch = sd.v_free + (2.0 * zeta / delta) * v;
+  multiplyJacobian(sim, sd, sd.nv_scratch, sd.row_scratch);
   sd.b = -sd.row_scratch;
   sd.b -= sd.drift;
-  multiplyJacobian(sim, sd, v, sd.row_scratch);
-  sd.b -= (2.0 * zeta / delta) * sd.row_scratch;
   sd.b -= sd.position_error / (delta * delta);
   // Time stepping drops the J' v term on the tangential rows (the paper allows it, §3.3):
   // a sticking contact then ends the step with exactly zero slip velocity, J_t v+ = 0,

@@ -2,6 +2,7 @@
 // (the exact law with its solver, or ccp, nakaoka, pyramid, penalty, pinocchio-*), warm-started
 // from the previous step; then per-candidate forces and states. Eigen and the solver core only.
 #include <algorithm>
+#include <cmath>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -66,9 +67,13 @@ std::string unsolvableMessage(const SimulatorModel& sim, const SimulatorData& sd
 
 void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   const Eigen::Index rows = sd.rows;
-  const bool finite_A =
-      sd.sparse ? Eigen::Map<const Eigen::VectorXd>(sd.A_sparse.valuePtr(), sd.A_sparse.nonZeros()).allFinite()
-                : sd.A.allFinite();
+  // (x * 0 sums to 0 exactly unless some x is inf or NaN: a vectorised pass, where allFinite()
+  // tested entry by entry, 3 % of a 256-contact tower's step)
+  const auto all_finite = [](const double* x, Eigen::Index n) {
+    return !std::isnan((Eigen::Map<const Eigen::ArrayXd>(x, n) * 0.0).sum());
+  };
+  const bool finite_A = sd.sparse ? all_finite(sd.A_sparse.valuePtr(), sd.A_sparse.nonZeros())
+                                  : all_finite(sd.A.data(), sd.A.size());
   if (!finite_A || !sd.b.allFinite())
     throw std::runtime_error("simulation diverged: non-finite Delassus operator or right-hand side at t = " +
                              std::to_string(sd.t));

@@ -25,6 +25,14 @@ class DelassusOperator {
   /// y = |A| |x|, entrywise absolute values (the rounding bound of A x, verdict.hpp)
   virtual void absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const = 0;
 
+  /// y = A x and y_abs = |A| |x| (a product and its rounding bound, for a verdict to follow); an
+  /// operator that reads A once for both overrides it.
+  virtual void multiplyWithAbs(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y,
+                               Eigen::Ref<Eigen::VectorXd> y_abs) const {
+    multiply(x, y);
+    absMultiply(x, y_abs);
+  }
+
   /// y += A[:, offset:offset+size] dx   (Gauss-Seidel update of u = A lambda - b)
   virtual void addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,
                                    const Eigen::Ref<const Eigen::VectorXd>& dx,
@@ -115,6 +123,8 @@ class SparseDelassus final : public DelassusOperator {
   Eigen::Index rows() const override { return A_.rows(); }
   void multiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
   void absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
+  void multiplyWithAbs(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y,
+                       Eigen::Ref<Eigen::VectorXd> y_abs) const override;
   void addColumnBlockTimes(Eigen::Index offset, Eigen::Index size, const Eigen::Ref<const Eigen::VectorXd>& dx,
                            Eigen::Ref<Eigen::VectorXd> y) const override;
   using DelassusOperator::diagonalBlock;

@@ -127,6 +127,7 @@ class DefaultSolver final : public ContactSolver {
   bool stick_sparse_path_ = false;
   bool stick_from_dense_ = false;  // stick_sparse_ holds a dense A's pattern
   Eigen::VectorXd stick_x_, stick_u_, stick_d_, stick_w_;
+  Eigen::VectorXd stick_abs_;  // |A| |stick_x_|, with stick_u_ (the verdict's bound)
   Eigen::Index stick_factor_rows_ = -1;    // the rows of the factor held (-1: none)
   Eigen::VectorXd stick_factor_diagonal_;  // its matrix's diagonal
   double stick_factor_shift_ = 0.0;        // and its shift rho

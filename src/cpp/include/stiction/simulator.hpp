@@ -196,6 +196,7 @@ struct SystemWork {
   pinocchio::Data data;
   std::vector<int> v_index;  ///< the world velocity coordinate of each local one (SystemModel's)
   Eigen::VectorXd q, v, zero, tau, nle, v_free, x;  ///< local coordinates; x: scratch
+  Eigen::VectorXd row_values;                       ///< one value per row of J (scratch)
   std::vector<int> rows;  ///< the problem row of each row of J (contacts touching this part)
   Eigen::MatrixXd J;      ///< rows x nv of the part: its columns of the contact Jacobian
   Eigen::MatrixXd W;      ///< D^-1/2 U^-1 J^T (M = U D U^T)
@@ -288,6 +289,7 @@ class SimulatorData {
   bool parts_share_rows = false;  ///< a contact between two parts: its rows in both
   std::vector<int> row_part, row_local;  ///< per row: its part and local row (rows in one part each)
   Eigen::VectorXd row_scratch;  ///< one value per row
+  Eigen::VectorXd nv_scratch;   ///< one value per velocity coordinate
 };
 
 /// The contact Jacobian J (rows x nv) of the last problem, assembled from the parts' columns.

@@ -85,10 +85,11 @@ struct VerdictMeasures {
 /// per_block. No allocation once the (thread-local) workspace has the problem's size.
 /// fresh_u: u = A lambda - b as DelassusOperator::multiply and a subtraction of b computed it (the
 /// double stage then takes it rather than a product of its own; an iterate's incrementally updated u
-/// is not that: its rounding is not what the bound covers).
+/// is not that: its rounding is not what the bound covers). fresh_abs: |A| |lambda| from the same
+/// pass (DelassusOperator::multiplyWithAbs), with fresh_u only.
 void measureVerdict(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
                     VerdictMeasures& out, double decisive, bool per_block = false,
-                    const Eigen::VectorXd* fresh_u = nullptr);
+                    const Eigen::VectorXd* fresh_u = nullptr, const Eigen::VectorXd* fresh_abs = nullptr);
 
 /// u = A lambda - b for the lambda of the last verdict measured in this solve (the double
 /// stage's, bit for bit what a product would give): true and `u` written when lambda is that one.
@@ -134,8 +135,9 @@ class StoppingTest {
   StoppingTest(const ContactProblem& problem, double tolerance);
   /// u_is_fresh: u is A lambda - b just multiplied (measureVerdict's fresh_u), not an iterate's
   /// incrementally updated u.
+  /// abs_product: |A| |lambda| computed with a fresh u (DelassusOperator::multiplyWithAbs), or null.
   Outcome check(const Eigen::Ref<const Eigen::VectorXd>& lam, const Eigen::VectorXd& u, double natural_map,
-                bool u_is_fresh = false);
+                bool u_is_fresh = false, const Eigen::VectorXd* abs_product = nullptr);
   double threshold() const { return threshold_; }
 
  private:
