@@ -75,10 +75,22 @@ void SparseDelassus::multiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen:
     y.noalias() = A_ * x;
     return;
   }
+  const int* outer = A_.outerIndexPtr();
+  const int* inner = A_.innerIndexPtr();
+  const double* value = A_.valuePtr();
   for (Eigen::Index j = 0; j < A_.cols(); ++j) {
-    double sum = 0.0;
-    for (Matrix::InnerIterator it(A_, j); it; ++it) sum += it.value() * x[it.row()];
-    y[j] = sum;
+    // four partial sums: one chain of additions waited on each addition's latency
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    int p = outer[j];
+    const int end = outer[j + 1];
+    for (; p + 4 <= end; p += 4) {
+      s0 += value[p] * x[inner[p]];
+      s1 += value[p + 1] * x[inner[p + 1]];
+      s2 += value[p + 2] * x[inner[p + 2]];
+      s3 += value[p + 3] * x[inner[p + 3]];
+    }
+    for (; p < end; ++p) s0 += value[p] * x[inner[p]];
+    y[j] = (s0 + s1) + (s2 + s3);
   }
 }
 
@@ -87,10 +99,19 @@ void SparseDelassus::absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eig
     y.noalias() = abs_ * x.cwiseAbs();
     return;
   }
+  const int* outer = A_.outerIndexPtr();
+  const int* inner = A_.innerIndexPtr();
+  const double* value = A_.valuePtr();
   for (Eigen::Index j = 0; j < A_.cols(); ++j) {
-    double sum = 0.0;
-    for (Matrix::InnerIterator it(A_, j); it; ++it) sum += std::abs(it.value()) * std::abs(x[it.row()]);
-    y[j] = sum;
+    double s0 = 0.0, s1 = 0.0;  // (two partial sums, as multiply's four)
+    int p = outer[j];
+    const int end = outer[j + 1];
+    for (; p + 2 <= end; p += 2) {
+      s0 += std::abs(value[p]) * std::abs(x[inner[p]]);
+      s1 += std::abs(value[p + 1]) * std::abs(x[inner[p + 1]]);
+    }
+    for (; p < end; ++p) s0 += std::abs(value[p]) * std::abs(x[inner[p]]);
+    y[j] = s0 + s1;
   }
 }
 
@@ -102,15 +123,27 @@ void SparseDelassus::multiplyWithAbs(const Eigen::Ref<const Eigen::VectorXd>& x,
     absMultiply(x, y_abs);
     return;
   }
+  const int* outer = A_.outerIndexPtr();
+  const int* inner = A_.innerIndexPtr();
+  const double* value = A_.valuePtr();
   for (Eigen::Index j = 0; j < A_.cols(); ++j) {
-    double sum = 0.0, abs_sum = 0.0;
-    for (Matrix::InnerIterator it(A_, j); it; ++it) {
-      const double a = it.value(), xi = x[it.row()];
-      sum += a * xi;
-      abs_sum += std::abs(a) * std::abs(xi);
+    double s0 = 0.0, s1 = 0.0, a0 = 0.0, a1 = 0.0;  // (partial sums, as multiply's)
+    int p = outer[j];
+    const int end = outer[j + 1];
+    for (; p + 2 <= end; p += 2) {
+      const double x0 = x[inner[p]], x1 = x[inner[p + 1]];
+      s0 += value[p] * x0;
+      s1 += value[p + 1] * x1;
+      a0 += std::abs(value[p]) * std::abs(x0);
+      a1 += std::abs(value[p + 1]) * std::abs(x1);
     }
-    y[j] = sum;
-    y_abs[j] = abs_sum;
+    for (; p < end; ++p) {
+      const double xi = x[inner[p]];
+      s0 += value[p] * xi;
+      a0 += std::abs(value[p]) * std::abs(xi);
+    }
+    y[j] = s0 + s1;
+    y_abs[j] = a0 + a1;
   }
 }
 
