@@ -375,3 +375,49 @@ def test_a_gap_within_its_rounding_enters_b_as_zero():
     lifted.step()
     ld = lifted.data
     np.testing.assert_allclose(np.asarray(ld.position_error)[2::3], 1e-9, rtol=1e-6)
+
+
+TOWER_OPERATOR = r"""
+import sys, numpy as np
+from stiction.scene import build_scene
+from stiction.simulator import Simulator
+sim = Simulator(build_scene({"name": "tower-16", "array": {"layout": "tower", "count": 16}, "ground": {"mu": 0.5}}))
+sim.data.v = np.random.default_rng(3).uniform(-0.01, 0.01, sim.model.nv)  # a moving tower: no zero blocks
+sim.step()
+sim.step()  # the second step's A comes from the plan of the first's pattern
+np.save(sys.argv[1], np.asarray(sim.data.A))
+"""
+
+
+@pytest.mark.parametrize("kernels", ["0", "1"])
+def test_the_tower_operator_is_the_same_with_and_without_vector_kernels(tmp_path, kernels):
+    """Free bodies' 3 x 3 blocks of a sparse A are assembled by an AVX2/FMA kernel where the processor
+    has it (STICTION_VECTOR_KERNELS=0 turns it off): either way A equals the whole world's J M^-1 J^T
+    from Pinocchio's Python bindings, and is exactly symmetric."""
+    import os
+
+    out = tmp_path / "A.npy"
+    env = dict(os.environ, STICTION_VECTOR_KERNELS=kernels)
+    subprocess.run([sys.executable, "-c", TOWER_OPERATOR, str(out)], check=True, env=env)
+    A = np.load(out)
+    # the same state in this process, for the reference
+    from stiction.scene import build_scene
+
+    sim = Simulator(build_scene({"name": "tower-16", "array": {"layout": "tower", "count": 16}, "ground": {"mu": 0.5}}))
+    sim.data.v = np.random.default_rng(3).uniform(-0.01, 0.01, sim.model.nv)
+    sim.step()
+    q, v = np.array(sim.data.q), np.array(sim.data.v)
+    sim.step()
+    assert sim.data.sparse
+    _, _, reference = world_reference(sim, q, v)
+    assert A.shape == reference.shape == (192, 192)
+    np.testing.assert_array_equal(A, A.T)
+    np.testing.assert_allclose(A, reference, rtol=0, atol=1e-12 * np.abs(reference).max())
+
+
+def test_a_wrong_vector_kernel_switch_is_an_error():
+    import os
+
+    env = dict(os.environ, STICTION_VECTOR_KERNELS="yes")
+    out = subprocess.run([sys.executable, "-c", TOWER_OPERATOR, "/dev/null"], capture_output=True, text=True, env=env)
+    assert out.returncode != 0 and "STICTION_VECTOR_KERNELS must be 0 or 1, got 'yes'" in out.stderr

@@ -2,9 +2,16 @@
 // then the contact problem's A = J M^-1 J^T (eq. 22) and b (eq. 27).
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#define STICTION_X86_KERNELS 1
+#endif
 
 #include <pinocchio/algorithm/cholesky.hpp>
 #include <pinocchio/algorithm/crba.hpp>
@@ -189,9 +196,80 @@ Eigen::Index delassusFactors(SimulatorData& sd) {
       w.data.U.triangularView<Eigen::UnitUpper>().solveInPlace(w.W);
     }
     w.W = w.data.Dinv.cwiseSqrt().asDiagonal() * w.W;
+    if (w.W.rows() == 6) {
+      // W^T by columns (row k of W contiguous), padded: the vector kernel reads a block's three
+      // values of row k four at a time
+      w.Wt.resize(static_cast<std::size_t>(6 * n + 4));
+      for (Eigen::Index k = 0; k < 6; ++k)
+        for (Eigen::Index c = 0; c < n; ++c) w.Wt[static_cast<std::size_t>(k * n + c)] = w.W(k, c);
+      std::fill(w.Wt.end() - 4, w.Wt.end(), 0.0);
+    }
   }
   return entries;
 }
+
+#ifdef STICTION_X86_KERNELS
+// The free-body blocks of assembleFromPlan with AVX2 and FMA (chosen at run time: the module is
+// built for any x86-64). Raw pointers and intrinsics only: no Eigen code is compiled for these
+// instructions, so no template meets the rest of the binary compiled twice (docs/development.md,
+// "No -march=native"). Column c of a block is sum_k W_i[k, :] W_j[k, c] (row k of W_i, three
+// values of W^T's column k, one fused multiply-add per k); its mirror's row r the same products
+// in the same order, so A stays exactly symmetric.
+__attribute__((target("avx2,fma"))) void freeBodyBlocksAvx2(const AssemblyBlock* blocks, std::size_t count,
+                                                            const double* const* wt, const int* stride,
+                                                            double* value) {
+  // three lanes: two and one (a masked store is microcoded on some processors: it was most of this loop)
+  const auto store3 = [](double* to, __m256d v) __attribute__((target("avx2,fma"))) {
+    _mm_storeu_pd(to, _mm256_castpd256_pd128(v));
+    _mm_store_sd(to + 2, _mm256_extractf128_pd(v, 1));
+  };
+  for (std::size_t b = 0; b < count; ++b) {
+    const AssemblyBlock& e = blocks[b];
+    if (!e.free_bodies) continue;
+    const bool mirror = e.mirror[0] >= 0;
+    __m256d col0 = _mm256_setzero_pd(), col1 = col0, col2 = col0, row0 = col0, row1 = col0, row2 = col0;
+    for (int p = 0; p < 2 && e.part[p] >= 0; ++p) {
+      const int n = stride[e.part[p]];
+      const double* ti = wt[e.part[p]] + e.row[p];
+      const double* tj = wt[e.part[p]] + e.col[p];
+      for (int k = 0; k < 6; ++k, ti += n, tj += n) {
+        const __m256d wi = _mm256_loadu_pd(ti);  // W_i[k, 0..2] (and one value past: unused)
+        col0 = _mm256_fmadd_pd(wi, _mm256_broadcast_sd(tj), col0);
+        col1 = _mm256_fmadd_pd(wi, _mm256_broadcast_sd(tj + 1), col1);
+        col2 = _mm256_fmadd_pd(wi, _mm256_broadcast_sd(tj + 2), col2);
+        if (mirror) {
+          const __m256d wj = _mm256_loadu_pd(tj);
+          row0 = _mm256_fmadd_pd(wj, _mm256_broadcast_sd(ti), row0);
+          row1 = _mm256_fmadd_pd(wj, _mm256_broadcast_sd(ti + 1), row1);
+          row2 = _mm256_fmadd_pd(wj, _mm256_broadcast_sd(ti + 2), row2);
+        }
+      }
+    }
+    store3(value + e.position[0], col0);
+    store3(value + e.position[1], col1);
+    store3(value + e.position[2], col2);
+    if (mirror) {
+      store3(value + e.mirror[0], row0);
+      store3(value + e.mirror[1], row1);
+      store3(value + e.mirror[2], row2);
+    }
+  }
+}
+
+// AVX2 and FMA on this processor, and not turned off (STICTION_VECTOR_KERNELS=0: the portable
+// loops, to compare with)
+bool vectorKernels() {
+  static const bool use = [] {
+    const char* env = std::getenv("STICTION_VECTOR_KERNELS");
+    if (env != nullptr && std::strcmp(env, "0") == 0) return false;
+    if (env != nullptr && std::strcmp(env, "1") != 0 && env[0] != '\0')
+      throw std::invalid_argument(std::string("STICTION_VECTOR_KERNELS must be 0 or 1, got '") + env + "'");
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  }();
+  return use;
+}
+#endif
 
 // The sparse A's values straight from the parts' W (the plan, sd.assembly, listed when the pattern
 // was last assembled): each block of the lower triangle (a pair of contacts, or anchors) is the
@@ -202,12 +280,27 @@ void assembleFromPlan(SimulatorData& sd) {
   double* value = sd.A_sparse.valuePtr();
   sd.part_w.resize(sd.parts.size());
   for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.part_w[s] = sd.parts[s].W.data();
+#ifdef STICTION_X86_KERNELS
+  const bool vector = vectorKernels();
+  if (vector) {
+    sd.part_wt.resize(sd.parts.size());
+    sd.part_stride.resize(sd.parts.size());
+    for (std::size_t s = 0; s < sd.parts.size(); ++s) {
+      sd.part_wt[s] = sd.parts[s].Wt.data();
+      sd.part_stride[s] = static_cast<int>(sd.parts[s].rows.size());
+    }
+    freeBodyBlocksAvx2(sd.assembly.data(), sd.assembly.size(), sd.part_wt.data(), sd.part_stride.data(), value);
+  }
+#else
+  const bool vector = false;
+#endif
   const auto dot6 = [](const double* a, const double* b) {
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5];
   };
   double block[9];  // column-major 3 x 3
   for (const AssemblyBlock& e : sd.assembly) {
     const int ki = e.rows, kj = e.cols;
+    if (e.free_bodies && vector) continue;  // done above
     if (e.free_bodies) {  // free bodies' spatial contacts: W has 6 rows, blocks are 3 x 3
       const double* wi = sd.part_w[static_cast<std::size_t>(e.part[0])] + 6 * e.row[0];
       const double* wj = sd.part_w[static_cast<std::size_t>(e.part[0])] + 6 * e.col[0];

@@ -197,6 +197,7 @@ struct SystemWork {
   std::vector<int> v_index;  ///< the world velocity coordinate of each local one (SystemModel's)
   Eigen::VectorXd q, v, zero, tau, nle, v_free, x;  ///< local coordinates; x: scratch
   Eigen::VectorXd row_values;                       ///< one value per row of J (scratch)
+  std::vector<double> Wt;                           ///< a free body's W^T by columns, padded (the vector kernel's)
   std::vector<int> rows;  ///< the problem row of each row of J (contacts touching this part)
   Eigen::MatrixXd J;      ///< rows x nv of the part: its columns of the contact Jacobian
   Eigen::MatrixXd W;      ///< D^-1/2 U^-1 J^T (M = U D U^T)
@@ -285,7 +286,8 @@ class SimulatorData {
   std::vector<std::vector<int>> triplet_part_rows;  ///< each part's rows when the triplets were listed
   std::vector<AssemblyBlock> assembly;  ///< the sparse A's lower triangle, block by block, from the parts' W
   bool assembly_valid = false;          ///< `assembly` lists the triplets' pattern
-  std::vector<const double*> part_w;    ///< each part's W (assembleFromPlan's workspace)
+  std::vector<const double*> part_w, part_wt;  ///< each part's W, W^T (assembleFromPlan's workspace)
+  std::vector<int> part_stride;                ///< each part's rows (W^T's column length)
   bool parts_share_rows = false;  ///< a contact between two parts: its rows in both
   std::vector<int> row_part, row_local;  ///< per row: its part and local row (rows in one part each)
   Eigen::VectorXd row_scratch;  ///< one value per row
