@@ -61,7 +61,11 @@ SparseDelassus::SparseDelassus(Matrix A, bool symmetric) : A_(std::move(A)), sym
     abs_ = A_;  // same pattern; |values| in place (cheaper than Eigen's generic A_.cwiseAbs())
     for (Eigen::Index k = 0; k < abs_.nonZeros(); ++k) abs_.valuePtr()[k] = std::abs(abs_.valuePtr()[k]);
   }
-  diagonal_ = A_.diagonal();
+  diagonal_position_.assign(static_cast<std::size_t>(A_.cols()), -1);
+  for (Eigen::Index j = 0; j < A_.cols(); ++j)
+    for (Eigen::Index p = A_.outerIndexPtr()[j]; p < A_.outerIndexPtr()[j + 1]; ++p)
+      if (A_.innerIndexPtr()[p] == j) diagonal_position_[static_cast<std::size_t>(j)] = p;
+  updateDiagonal();
   std::vector<Eigen::Index> per_row(static_cast<std::size_t>(A_.rows()), 0);
   for (Eigen::Index k = 0; k < A_.nonZeros(); ++k) ++per_row[A_.innerIndexPtr()[k]];
   for (Eigen::Index c : per_row) max_row_entries_ = std::max(max_row_entries_, c);
@@ -183,8 +187,27 @@ bool SparseDelassus::assignValues(const Matrix& A) {
   std::copy(A.valuePtr(), A.valuePtr() + nnz, A_.valuePtr());
   if (!symmetric_)
     for (Eigen::Index k = 0; k < nnz; ++k) abs_.valuePtr()[k] = std::abs(A_.valuePtr()[k]);
-  diagonal_ = A_.diagonal();
+  updateDiagonal();
   return true;
+}
+
+bool SparseDelassus::swapValues(Matrix& A) {
+  if (dense_built_ || !A.isCompressed() || A.rows() != A_.rows() || A.cols() != A_.cols() ||
+      A.nonZeros() != A_.nonZeros())
+    return false;
+  A_.swap(A);
+  if (!symmetric_)
+    for (Eigen::Index k = 0; k < A_.nonZeros(); ++k) abs_.valuePtr()[k] = std::abs(A_.valuePtr()[k]);
+  updateDiagonal();
+  return true;
+}
+
+void SparseDelassus::updateDiagonal() {
+  diagonal_.resize(A_.cols());
+  for (Eigen::Index j = 0; j < A_.cols(); ++j) {
+    const Eigen::Index p = diagonal_position_[static_cast<std::size_t>(j)];
+    diagonal_[j] = p >= 0 ? A_.valuePtr()[p] : 0.0;
+  }
 }
 
 double SparseDelassus::relativeAsymmetry() const {

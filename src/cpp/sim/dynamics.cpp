@@ -402,6 +402,7 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
   // solvers handle well (the default rule's threshold), at most 25 % of the entries (a tower's
   // block-tridiagonal A is 14-20 %).
   sd.sparse = sd.parts.size() > 1 && rows > kSparseDelassusRows && entries * 4 <= rows * rows;
+  sd.a_in_operator = false;  // A_sparse holds this step's A again
   if (sd.sparse && sd.parts_share_rows) {  // rows shared by two parts (contacts between bodies)
     // While the entries' (row, column) sequence is last step's (the same contacts on the same
     // rows), A's pattern and the plan of its entries hold: the values are computed in place
@@ -425,6 +426,7 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.triplet_part_rows[s] = sd.parts[s].rows;
     sd.A_sparse.resize(rows, rows);
     sd.A_sparse.setFromTriplets(sd.triplets.begin(), sd.triplets.end());
+    ++sd.pattern_version;
     sd.A_sparse.makeCompressed();
     // each entry's position in the compressed storage (a search in its column)
     sd.triplet_position.resize(count);
@@ -451,6 +453,7 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
       }
     sd.A_sparse.resize(rows, rows);
     sd.A_sparse.resizeNonZeros(entries);
+    ++sd.pattern_version;  // (written anew each step: assignValues compares it)
     int* outer = sd.A_sparse.outerIndexPtr();
     int* inner = sd.A_sparse.innerIndexPtr();
     double* value = sd.A_sparse.valuePtr();

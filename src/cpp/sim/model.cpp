@@ -252,7 +252,8 @@ Eigen::MatrixXd denseMassMatrix(const SimulatorData& sd) {
 }
 
 Eigen::MatrixXd denseDelassus(const SimulatorData& sd) {
-  if (sd.sparse) return Eigen::MatrixXd(sd.A_sparse);
+  if (sd.sparse)
+    return Eigen::MatrixXd(sd.a_in_operator && sd.sparse_delassus ? sd.sparse_delassus->sparseMatrix() : sd.A_sparse);
   return sd.A;
 }
 

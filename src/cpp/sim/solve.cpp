@@ -89,12 +89,20 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     return cons;
   };
   const bool same_blocks = sd.problem && sd.active == sd.problem_active;
-  if (sd.sparse && same_blocks && sd.sparse_delassus && sd.sparse_delassus->assignValues(sd.A_sparse)) {
+  if (sd.sparse && same_blocks && sd.sparse_delassus && sd.operator_pattern_version == sd.pattern_version &&
+      sd.sparse_delassus->swapValues(sd.A_sparse)) {
+    // the pattern the operator was built with (A assembled by its plan since): the new values
+    // change places with the old, no copy (denseDelassus reads them from the operator)
+    sd.a_in_operator = true;
+    sd.b_scaled = scale * sd.b;
+    sd.problem->setB(sd.b_scaled);
+  } else if (sd.sparse && same_blocks && sd.sparse_delassus && sd.sparse_delassus->assignValues(sd.A_sparse)) {
     sd.b_scaled = scale * sd.b;  // same contacts, same pattern: new values in place, no allocation
     sd.problem->setB(sd.b_scaled);
   } else if (sd.sparse) {  // a new pattern: the contacts changed
     sd.delassus.reset();
     sd.sparse_delassus = std::make_shared<SparseDelassus>(sd.A_sparse, /*symmetric=*/true);
+    sd.operator_pattern_version = sd.pattern_version;
     sd.problem = std::make_unique<ContactProblem>(sd.sparse_delassus, scale * sd.b, constraints(), 1e-6, false);
     sd.problem_active = sd.active;
   } else if (!same_blocks || !sd.delassus) {

@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <mutex>
+#include <vector>
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
@@ -146,11 +147,19 @@ class SparseDelassus final : public DelassusOperator {
   /// to the next while the same contacts are active): O(entries), no allocation. Returns false and
   /// changes nothing when the pattern differs or dense() was already built (its copy would go stale).
   bool assignValues(const Matrix& A);
+  /// The same for an A whose pattern the caller knows is this operator's (the simulator's, while
+  /// its plan of A holds): A and this operator's matrix swap storage, O(1); A then holds the
+  /// previous values. False (nothing changed) when sizes differ or dense() was built.
+  bool swapValues(Matrix& A);
+  /// This operator's matrix (for reading).
+  const Matrix& sparseMatrix() const { return A_; }
 
  private:
   Matrix A_;
   Matrix abs_;  // |A|, for the rounding bound (a non-symmetric A only)
   Eigen::VectorXd diagonal_;  // computed once (a sparse diagonal is a search per column)
+  std::vector<Eigen::Index> diagonal_position_;  // where each diagonal entry is stored (-1: none)
+  void updateDiagonal();
   Eigen::Index max_row_entries_ = 0;  // the pattern's fullest row
   bool symmetric_ = false;
   mutable std::once_flag dense_once_;

@@ -286,6 +286,9 @@ class SimulatorData {
   std::vector<std::vector<int>> triplet_part_rows;  ///< each part's rows when the triplets were listed
   std::vector<AssemblyBlock> assembly;  ///< the sparse A's lower triangle, block by block, from the parts' W
   bool assembly_valid = false;          ///< `assembly` lists the triplets' pattern
+  long pattern_version = 0;             ///< counts the sparse A's pattern builds (the plan keeps it)
+  long operator_pattern_version = -1;   ///< the pattern sparse_delassus was built with
+  bool a_in_operator = false;           ///< this step's A_sparse values were swapped into sparse_delassus
   std::vector<const double*> part_w, part_wt;  ///< each part's W, W^T (assembleFromPlan's workspace)
   std::vector<int> part_stride;                ///< each part's rows (W^T's column length)
   bool parts_share_rows = false;  ///< a contact between two parts: its rows in both
