@@ -232,11 +232,9 @@ def test_the_sticking_step_does_not_wander_along_the_null_space():
 
 def test_the_held_factor_serves_a_resting_tower_and_never_decides_an_answer():
     """The sticking step keeps its factor: on the next step of a resting tower (the same contacts, A
-    a step later) the warm start is the answer already (box-tower-20: its gaps are zero to their
-    rounding, so b repeats), or one refinement step with the held factor converges (a 48-box tower,
-    whose upper boxes still settle by ~1e-12 m/s): no factorization is needed. A held factor of
-    another matrix with the same diagonal only costs a try: the answer is the stopping test's, as
-    a fresh solver's."""
+    a step later) the warm start is the answer already (b repeated), or one refinement step with the
+    held factor converges: no factorization is needed. A held factor of another matrix with the same
+    diagonal only costs a try: the answer is the stopping test's, as a fresh solver's."""
     from stiction.scene import build_scene, load_scene
     from stiction.simulator import Simulator
 
@@ -250,11 +248,12 @@ def test_the_held_factor_serves_a_resting_tower_and_never_decides_an_answer():
             seen.append("warm start" if r.stages[0].iterations == 0 else r.stages[0].outcome)
         return seen
 
-    seen = resting_steps(Simulator(load_scene("box-tower-20")), 20)
-    assert seen.count("warm start") >= 19, seen
-    seen = resting_steps(Simulator(build_scene({"name": "tower-48", "array": {"layout": "tower", "count": 48},
-                                                "ground": {"mu": 0.5}})), 40)
-    assert seen.count("converged (held factor)") >= 15 and seen.count("converged") <= 2, seen
+    for sim, n in [(Simulator(load_scene("box-tower-20")), 20),
+                   (Simulator(build_scene({"name": "tower-48", "array": {"layout": "tower", "count": 48},
+                                           "ground": {"mu": 0.5}})), 40)]:
+        seen = resting_steps(sim, n)
+        assert seen.count("converged (held factor)") >= n // 4, seen
+        assert seen.count("converged (held factor)") + seen.count("warm start") >= n - 1, seen
 
     rng = np.random.default_rng(4)
     from stiction.problems import cube_on_ground

@@ -79,9 +79,26 @@ void detectContacts(const SimulatorModel& sim, SimulatorData& sd) {
   // Sphere (or point) against half-space, analytic.
   for (std::size_t i = 0; i < sim.contacts.size(); ++i) {
     const SphereContact& c = sim.contacts[i];
+    const HalfSpace& h = sim.halfspaces[c.halfspace];
     const pinocchio::Frame& f = model.frames[c.frame];
-    const Eigen::Vector3d center = jointPlacement(sim, sd, f.parentJoint).act(f.placement.act(c.offset));
-    sd.gaps[i] = sd.plane_normal.col(c.halfspace).dot(center) - sd.plane_offset[c.halfspace] - c.radius;
+    const pinocchio::SE3& oMj = jointPlacement(sim, sd, f.parentJoint);
+    if (h.frame != 0) {
+      // A body's face: the centre in the face's frame, from the difference of the two joints'
+      // positions first. World coordinates would round each corner's gap to the positions'
+      // magnitude (9e-16 m at 6 m up a tower), corner by corner, and no motion fits such gaps:
+      // through Psi / delta^2 they left up to 2e-10 m/s of b outside A's range, above the
+      // tolerance. Neighbouring bodies' positions subtract exactly, so this gap rounds to the
+      // bodies' size (~1e-17 m).
+      const pinocchio::Frame& face = model.frames[h.frame];
+      const pinocchio::SE3& oMface_joint = jointPlacement(sim, sd, face.parentJoint);
+      const Eigen::Vector3d relative =
+          (oMj.translation() - oMface_joint.translation()) + oMj.rotation() * f.placement.act(c.offset);
+      const Eigen::Vector3d in_face = face.placement.actInv(Eigen::Vector3d(oMface_joint.rotation().transpose() * relative));
+      sd.gaps[i] = h.normal.dot(in_face) - h.offset - c.radius;
+    } else {
+      const Eigen::Vector3d center = oMj.act(f.placement.act(c.offset));
+      sd.gaps[i] = sd.plane_normal.col(c.halfspace).dot(center) - sd.plane_offset[c.halfspace] - c.radius;
+    }
     if (sd.gaps[i] <= sim.settings.activation_distance) {
       sd.active.push_back(static_cast<int>(i));
       sd.candidate_rows[i] = candidateRows(sim, static_cast<int>(i));

@@ -32,12 +32,14 @@ void forwardKinematics(const SimulatorModel& sim, SimulatorData& sd, const Eigen
 
 namespace {
 
-// A gap is a difference of world positions, each rounded to a unit roundoff of its magnitude, so
-// one within kGapRoundingUlps of those units (`position_scale`: the magnitudes involved) is zero
-// to what the positions know, and enters Psi as zero. Kept, such noise differs corner by corner
-// (1 ulp at 6 m: 9e-16 m), and no motion of the bodies fits it: on a 64-box tower its Psi / delta^2
-// left 2e-10 m/s per row of b outside A's range, above the tolerance 1e-10 ||b||, and the steps
-// it fell on could not converge. (The reported gaps keep their computed values.)
+// A coal gap is computed from world placements, each rounded to a unit roundoff of its magnitude,
+// so one within kGapRoundingUlps of those units (`position_scale`: the magnitudes involved) is zero
+// to what the positions know, and enters Psi as zero. Kept, such noise differs point by point
+// (1 ulp at 6 m: 9e-16 m), and no motion of the bodies fits it: its Psi / delta^2 (2e-10 m/s per
+// row at 6 m) can exceed the tolerance 1e-10 ||b|| outside A's range. (The reported gaps keep their
+// computed values. Sphere contacts on a body's face compute their gap relative to that body,
+// detect.cpp, rounded to the bodies' size: not thresholded, as a threshold between two corners'
+// gaps would itself be such an inconsistency.)
 constexpr double kGapRoundingUlps = 8.0;
 double resolvedGap(double gap, double position_scale) {
   return std::abs(gap) <= kGapRoundingUlps * kUnitRoundoff * position_scale ? 0.0 : gap;
@@ -267,7 +269,7 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
       sd.tangent_row[row + r++] = 1.0;
     }
     sd.drift[row + r] = n.dot(acc_center);
-    sd.position_error[row + r] = resolvedGap(sd.gaps[i], point_w.norm() + oMj.translation().norm() + c.radius);
+    sd.position_error[row + r] = sd.gaps[i];
     row += k;
   }
   for (const PointAnchor& a : sim.anchors) {
