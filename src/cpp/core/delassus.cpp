@@ -24,6 +24,16 @@ void DenseDelassus::absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x,
   for (Eigen::Index j = 0; j < A_.cols(); ++j) y += A_.col(j).cwiseAbs() * std::abs(x[j]);  // no |A| copy
 }
 
+void DenseDelassus::multiplyWithAbs(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y,
+                                    Eigen::Ref<Eigen::VectorXd> y_abs) const {
+  y.setZero();
+  y_abs.setZero();
+  for (Eigen::Index j = 0; j < A_.cols(); ++j) {  // one pass over A's columns for both
+    y.noalias() += A_.col(j) * x[j];
+    y_abs.noalias() += A_.col(j).cwiseAbs() * std::abs(x[j]);
+  }
+}
+
 void DenseDelassus::addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,
                                         const Eigen::Ref<const Eigen::VectorXd>& dx,
                                         Eigen::Ref<Eigen::VectorXd> y) const {

@@ -276,8 +276,7 @@ bool vectorKernels() {
 // product of its two blocks' columns of W in the one or two parts both belong to, written with its
 // mirror, three values at a time. (The parts' dense shares summed into place entry by entry cost
 // twice that: a quarter of a 256-contact tower's step went to the scattered sums.)
-void assembleFromPlan(SimulatorData& sd) {
-  double* value = sd.A_sparse.valuePtr();
+void assembleFromPlan(SimulatorData& sd, double* value) {
   sd.part_w.resize(sd.parts.size());
   for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.part_w[s] = sd.parts[s].W.data();
 #ifdef STICTION_X86_KERNELS
@@ -330,10 +329,11 @@ void assembleFromPlan(SimulatorData& sd) {
   }
 }
 
-// The plan of assembleFromPlan for A_sparse's pattern just built: the blocks are the active
-// contacts' rows, then the anchors' (3 each). False when a block pair has more than two shares
-// (blocks in more than two parts: not a contact's) or a block is wider than 3 rows.
-bool planAssembly(const SimulatorModel& sim, SimulatorData& sd) {
+// The plan of assembleFromPlan for A_sparse's pattern just built (dense: for sd.A, stored by
+// columns): the blocks are the active contacts' rows, then the anchors' (3 each). False when a
+// block pair has more than two shares (blocks in more than two parts: not a contact's) or a block
+// is wider than 3 rows.
+bool planAssembly(const SimulatorModel& sim, SimulatorData& sd, bool dense) {
   const Eigen::Index rows = sd.rows;
   std::vector<int> block_of(static_cast<std::size_t>(rows)), start;  // each row's block; each block's first row
   int row = 0;
@@ -352,6 +352,7 @@ bool planAssembly(const SimulatorModel& sim, SimulatorData& sd) {
   const int* outer = sd.A_sparse.outerIndexPtr();
   const int* inner = sd.A_sparse.innerIndexPtr();
   auto position = [&](int r, int c) {
+    if (dense) return static_cast<int>(r + c * rows);
     return static_cast<int>(std::lower_bound(inner + outer[c], inner + outer[c + 1], r) - inner);
   };
   std::unordered_map<long long, int> index;  // (block i, block j) -> its entry
@@ -393,6 +394,14 @@ bool planAssembly(const SimulatorModel& sim, SimulatorData& sd) {
   return true;
 }
 
+// The parts hold the rows they held when the plan was made (sd.triplet_part_rows).
+bool samePartRows(const SimulatorData& sd) {
+  if (sd.triplet_part_rows.size() != sd.parts.size()) return false;
+  for (std::size_t s = 0; s < sd.parts.size(); ++s)
+    if (sd.parts[s].rows != sd.triplet_part_rows[s]) return false;
+  return true;
+}
+
 }  // namespace
 
 void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
@@ -408,11 +417,10 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     // rows), A's pattern and the plan of its entries hold: the values are computed in place
     // (setFromTriplets was a third of a tower's step).
     const auto count = static_cast<std::size_t>(entries);
-    bool same = sd.assembly_valid && sd.A_sparse.rows() == rows && sd.triplet_position.size() == count &&
-                sd.triplets.size() == count && sd.triplet_part_rows.size() == sd.parts.size();
-    for (std::size_t s = 0; same && s < sd.parts.size(); ++s) same = sd.parts[s].rows == sd.triplet_part_rows[s];
+    bool same = sd.assembly_kind == AssemblyKind::kSparse && sd.A_sparse.rows() == rows &&
+                sd.triplet_position.size() == count && sd.triplets.size() == count && samePartRows(sd);
     if (same) {
-      assembleFromPlan(sd);
+      assembleFromPlan(sd, sd.A_sparse.valuePtr());
       sd.A.resize(0, 0);
       return;
     }
@@ -436,12 +444,12 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
       const int row = sd.triplets[t].row(), col = sd.triplets[t].col();
       sd.triplet_position[t] = static_cast<int>(std::lower_bound(inner + outer[col], inner + outer[col + 1], row) - inner);
     }
-    sd.assembly_valid = planAssembly(sim, sd);
+    sd.assembly_kind = planAssembly(sim, sd, /*dense=*/false) ? AssemblyKind::kSparse : AssemblyKind::kNone;
     sd.A.resize(0, 0);
     return;
   }
-  for (SystemWork& w : sd.parts) partOperator(w);
   if (sd.sparse) {
+    for (SystemWork& w : sd.parts) partOperator(w);
     // Every row in one part: column c of A is its part's column, rows in the part's (ascending)
     // order; written straight into the compressed storage.
     sd.row_part.assign(static_cast<std::size_t>(rows), -1);
@@ -476,13 +484,24 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
   }
   sd.A_sparse.resize(0, 0);
   if (wholeWorldPart(sim, sd)) {
+    partOperator(sd.parts[0]);
     sd.A = sd.parts[0].A;
     return;
   }
+  // Several parts, dense (a few bodies): the same plan of blocks, positions in A's columns; the
+  // entries no two rows of a part share stay zero while the parts' rows stay.
+  if (sd.assembly_kind == AssemblyKind::kDense && sd.A.rows() == rows && sd.A.cols() == rows && samePartRows(sd)) {
+    assembleFromPlan(sd, sd.A.data());
+    return;
+  }
+  for (SystemWork& w : sd.parts) partOperator(w);
   sd.A.setZero(rows, rows);
   for (const SystemWork& w : sd.parts)
     for (Eigen::Index c = 0; c < static_cast<Eigen::Index>(w.rows.size()); ++c)
       for (Eigen::Index r = 0; r < static_cast<Eigen::Index>(w.rows.size()); ++r) sd.A(w.rows[r], w.rows[c]) += w.A(r, c);
+  sd.triplet_part_rows.resize(sd.parts.size());
+  for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.triplet_part_rows[s] = sd.parts[s].rows;
+  sd.assembly_kind = planAssembly(sim, sd, /*dense=*/true) ? AssemblyKind::kDense : AssemblyKind::kNone;
 }
 
 void multiplyJacobian(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& x, Eigen::VectorXd& y) {

@@ -32,7 +32,8 @@ sim = Simulator(build_scene({"name": f"cube-{layout}-{4 * cubes}", "array": {"la
 sim.rollout(warmup * sim.dt)
 traj = sim.rollout(steps * sim.dt)
 s = sim.summary(traj)
-blocks = np.array_split(traj.timings[1:, 4], 10)  # the statistic MuJoCo's timing below uses
+per_step = traj.timings[1:, 4]
+blocks = np.array_split(per_step, min(10, len(per_step)))  # the statistic MuJoCo's timing below uses
 print(json.dumps({"us_per_step": float(np.median([b.mean() for b in blocks])), "all_converged": s["all_converged"],
                   "max_penetration": s["max_penetration"], "max_body_drift": s["max_body_drift"],
                   "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}))

@@ -85,6 +85,8 @@ class DenseDelassus final : public DelassusOperator {
   void multiply(const Eigen::Ref<const Eigen::VectorXd>& x,
                 Eigen::Ref<Eigen::VectorXd> y) const override;
   void absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y) const override;
+  void multiplyWithAbs(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y,
+                       Eigen::Ref<Eigen::VectorXd> y_abs) const override;
   void addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,
                            const Eigen::Ref<const Eigen::VectorXd>& dx,
                            Eigen::Ref<Eigen::VectorXd> y) const override;

@@ -190,6 +190,9 @@ struct AssemblyBlock {
   bool free_bodies = false;  ///< 3 x 3 between free bodies (W: 6 rows in each part): the fixed-size path
 };
 
+/// The target a plan of A's blocks (SimulatorData::assembly) writes: none, A_sparse's values, or A.
+enum class AssemblyKind { kNone, kSparse, kDense };
+
 struct SystemWork {
   explicit SystemWork(const SystemModel& s);
 
@@ -285,7 +288,7 @@ class SimulatorData {
   std::vector<int> triplet_position;  ///< where each sits in A_sparse's compressed storage
   std::vector<std::vector<int>> triplet_part_rows;  ///< each part's rows when the triplets were listed
   std::vector<AssemblyBlock> assembly;  ///< the sparse A's lower triangle, block by block, from the parts' W
-  bool assembly_valid = false;          ///< `assembly` lists the triplets' pattern
+  AssemblyKind assembly_kind = AssemblyKind::kNone;  ///< what `assembly` was planned for
   long pattern_version = 0;             ///< counts the sparse A's pattern builds (the plan keeps it)
   long operator_pattern_version = -1;   ///< the pattern sparse_delassus was built with
   bool a_in_operator = false;           ///< this step's A_sparse values were swapped into sparse_delassus
