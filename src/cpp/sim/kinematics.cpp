@@ -1,7 +1,6 @@
 // Stages 1 and 3: forward kinematics of every part of the world, then the rows of the active
 // contacts and anchors (J by columns of parts, the drift J' v, the position error Psi).
 #include <array>
-#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -10,7 +9,6 @@
 #include <pinocchio/algorithm/kinematics.hpp>
 
 #include "stages.hpp"
-#include "stiction/verdict.hpp"  // kUnitRoundoff
 
 namespace stiction {
 namespace stages {
@@ -31,19 +29,6 @@ void forwardKinematics(const SimulatorModel& sim, SimulatorData& sd, const Eigen
 }
 
 namespace {
-
-// A coal gap is computed from world placements, each rounded to a unit roundoff of its magnitude,
-// so one within kGapRoundingUlps of those units (`position_scale`: the magnitudes involved) is zero
-// to what the positions know, and enters Psi as zero. Kept, such noise differs point by point
-// (1 ulp at 6 m: 9e-16 m), and no motion of the bodies fits it: its Psi / delta^2 (2e-10 m/s per
-// row at 6 m) can exceed the tolerance 1e-10 ||b|| outside A's range. (The reported gaps keep their
-// computed values. Sphere contacts on a body's face compute their gap relative to that body,
-// detect.cpp, rounded to the bodies' size: not thresholded, as a threshold between two corners'
-// gaps would itself be such an inconsistency.)
-constexpr double kGapRoundingUlps = 8.0;
-double resolvedGap(double gap, double position_scale) {
-  return std::abs(gap) <= kGapRoundingUlps * kUnitRoundoff * position_scale ? 0.0 : gap;
-}
 
 // The two bodies of a block of rows: the rows measure the velocity of a point of `plus`
 // relative to a point of `minus` (joint 0: the world, which does not move).
@@ -229,9 +214,7 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
         sd.drift[row + r] = drift;
         sd.tangent_row[row + r] = r + 1 < k ? 1.0 : 0.0;
       }
-      sd.position_error[row + k - 1] =
-          resolvedGap(sd.gaps[i], p.norm() + jointPlacement(sim, sd, bodies.plus).translation().norm() +
-                                      jointPlacement(sim, sd, bodies.minus).translation().norm());
+      sd.position_error[row + k - 1] = sd.gaps[i];
       row += k;
       continue;
     }
