@@ -131,7 +131,6 @@ Eigen::Index BlockCholesky3::symbolic(const std::vector<int>& order, bool keep) 
   if (!keep) return fill;
   order_ = order;
   position_ = position;
-  parent_ = parent;
   column_start_.assign(static_cast<std::size_t>(n + 1), 0);
   for (int j = 0; j < n; ++j)
     column_start_[static_cast<std::size_t>(j + 1)] = column_start_[static_cast<std::size_t>(j)] + count[static_cast<std::size_t>(j)];

@@ -133,8 +133,7 @@ void SparseDelassus::absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eig
 void SparseDelassus::multiplyWithAbs(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::Ref<Eigen::VectorXd> y,
                                      Eigen::Ref<Eigen::VectorXd> y_abs) const {
   if (!symmetric_) {
-    multiply(x, y);
-    absMultiply(x, y_abs);
+    DelassusOperator::multiplyWithAbs(x, y, y_abs);
     return;
   }
   const int* outer = A_.outerIndexPtr();
@@ -195,9 +194,7 @@ bool SparseDelassus::assignValues(const Matrix& A) {
       !std::equal(A.innerIndexPtr(), A.innerIndexPtr() + nnz, A_.innerIndexPtr()))
     return false;
   std::copy(A.valuePtr(), A.valuePtr() + nnz, A_.valuePtr());
-  if (!symmetric_)
-    for (Eigen::Index k = 0; k < nnz; ++k) abs_.valuePtr()[k] = std::abs(A_.valuePtr()[k]);
-  updateDiagonal();
+  valuesChanged();
   return true;
 }
 
@@ -206,10 +203,14 @@ bool SparseDelassus::swapValues(Matrix& A) {
       A.nonZeros() != A_.nonZeros())
     return false;
   A_.swap(A);
+  valuesChanged();
+  return true;
+}
+
+void SparseDelassus::valuesChanged() {
   if (!symmetric_)
     for (Eigen::Index k = 0; k < A_.nonZeros(); ++k) abs_.valuePtr()[k] = std::abs(A_.valuePtr()[k]);
   updateDiagonal();
-  return true;
 }
 
 void SparseDelassus::updateDiagonal() {

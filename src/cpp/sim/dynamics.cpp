@@ -158,6 +158,24 @@ void partOperator(SystemWork& w) {
   }
 }
 
+#ifdef STICTION_X86_KERNELS
+// AVX2 and FMA on this processor, and not turned off (STICTION_VECTOR_KERNELS=0: the portable
+// loops, to compare with)
+bool vectorKernels() {
+  static const bool use = [] {
+    const char* env = std::getenv("STICTION_VECTOR_KERNELS");
+    if (env != nullptr && std::strcmp(env, "0") == 0) return false;
+    if (env != nullptr && std::strcmp(env, "1") != 0 && env[0] != '\0')
+      throw std::invalid_argument(std::string("STICTION_VECTOR_KERNELS must be 0 or 1, got '") + env + "'");
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  }();
+  return use;
+}
+#else
+bool vectorKernels() { return false; }
+#endif
+
 // W_s = D^-1/2 U^-1 J_s^T for every part, so that A = sum_s W_s^T W_s (symmetric by construction);
 // returns the entries of the parts' dense shares, sum of n_s^2.
 Eigen::Index delassusFactors(SimulatorData& sd) {
@@ -196,9 +214,9 @@ Eigen::Index delassusFactors(SimulatorData& sd) {
       w.data.U.triangularView<Eigen::UnitUpper>().solveInPlace(w.W);
     }
     w.W = w.data.Dinv.cwiseSqrt().asDiagonal() * w.W;
-    if (w.W.rows() == 6) {
-      // W^T by columns (row k of W contiguous), padded: the vector kernel reads a block's three
-      // values of row k four at a time
+    if (w.W.rows() == 6 && vectorKernels()) {
+      // W^T by columns (row k of W contiguous), padded: the vector kernel of assembleFromPlan reads
+      // a block's three values of row k four at a time (written here, while W is in cache)
       w.Wt.resize(static_cast<std::size_t>(6 * n + 4));
       for (Eigen::Index k = 0; k < 6; ++k)
         for (Eigen::Index c = 0; c < n; ++c) w.Wt[static_cast<std::size_t>(k * n + c)] = w.W(k, c);
@@ -256,19 +274,6 @@ __attribute__((target("avx2,fma"))) void freeBodyBlocksAvx2(const AssemblyBlock*
   }
 }
 
-// AVX2 and FMA on this processor, and not turned off (STICTION_VECTOR_KERNELS=0: the portable
-// loops, to compare with)
-bool vectorKernels() {
-  static const bool use = [] {
-    const char* env = std::getenv("STICTION_VECTOR_KERNELS");
-    if (env != nullptr && std::strcmp(env, "0") == 0) return false;
-    if (env != nullptr && std::strcmp(env, "1") != 0 && env[0] != '\0')
-      throw std::invalid_argument(std::string("STICTION_VECTOR_KERNELS must be 0 or 1, got '") + env + "'");
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-  }();
-  return use;
-}
 #endif
 
 // The sparse A's values straight from the parts' W (the plan, sd.assembly, listed when the pattern

@@ -34,9 +34,6 @@ class BlockCholesky3 {
   void solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& x) const;
 
   Eigen::Index rows() const { return 3 * static_cast<Eigen::Index>(blocks_); }
-  /// The 3 x 3 blocks of L (diagonal included): its fill.
-  Eigen::Index factorBlocks() const { return static_cast<Eigen::Index>(column_start_.empty() ? 0 : column_start_.back()); }
-  bool naturalOrder() const { return natural_; }
 
  private:
   // One entry of S's upper triangle (permuted), placed into the factorization's column workspace.
@@ -52,7 +49,6 @@ class BlockCholesky3 {
   bool natural_ = true;
   std::vector<std::vector<int>> adjacency_;  // S's block graph (old numbering), sorted, no self
   std::vector<int> order_, position_;        // order_[new] = old block, position_[old] = new
-  std::vector<int> parent_;                  // elimination tree
   std::vector<int> column_start_;            // L's block columns: diagonal block first, then rows ascending
   std::vector<int> column_rows_;
   std::vector<int> row_start_, row_columns_, row_slots_;  // L's block rows k: columns j < k in the

@@ -162,6 +162,7 @@ class SparseDelassus final : public DelassusOperator {
   Eigen::VectorXd diagonal_;  // computed once (a sparse diagonal is a search per column)
   std::vector<Eigen::Index> diagonal_position_;  // where each diagonal entry is stored (-1: none)
   void updateDiagonal();
+  void valuesChanged();  // |A| (non-symmetric A) and the diagonal, after new values
   Eigen::Index max_row_entries_ = 0;  // the pattern's fullest row
   bool symmetric_ = false;
   mutable std::once_flag dense_once_;
