@@ -105,3 +105,29 @@ def test_agrees_with_pinocchio_admm_on_the_rank_deficient_cube(sliding):
     ours = stiction.solve(p, tol=1e-13)
     theirs = pinocchio_solve(p, "admm", tol=1e-12, max_iter=20000)
     np.testing.assert_allclose(ours.u, p.A @ theirs.lam - p.b, atol=1e-9)
+
+
+@pytest.mark.parametrize("m", [1, 2, 3, 9, 27, 64, 192])
+def test_newton_small_lu_solves_systems_that_need_pivoting(m):
+    """The Newton step's own dense LU (newton.hpp, SmallDenseLU, up to 192 rows): a generalized
+    Jacobian of the natural map is not symmetric and its diagonal can vanish (a sliding block's
+    I - JP + kappa JP A rows), so rows must be swapped. Matrices with a zero diagonal, checked
+    against numpy; without the row swaps the 2 x 2 case divides by zero and the others lose
+    every digit."""
+    rng = np.random.default_rng(m)
+    for trial in range(20):
+        a = rng.standard_normal((m, m))
+        if m > 1:
+            a[np.diag_indices(m)] = 0.0
+        x = rng.standard_normal(m)
+        rhs = a @ x
+        got = stiction._core._small_dense_lu_solve(a, rhs)
+        expected = np.linalg.solve(a, rhs)
+        cond = np.linalg.cond(a)
+        assert np.linalg.norm(got - expected) <= 1e-13 * cond * np.linalg.norm(expected), (trial, cond)
+    # a singular matrix gives non-finite values, which Newton reports as a singular system
+    a = np.ones((m, m))
+    if m > 1:
+        assert not np.isfinite(stiction._core._small_dense_lu_solve(a, np.arange(m, dtype=float))).all()
+    with pytest.raises(ValueError, match="at most 192 rows"):
+        stiction._core._small_dense_lu_solve(np.eye(193), np.ones(193))

@@ -7,6 +7,7 @@
 #include "expose.hpp"
 #include "stiction/exact_law.hpp"
 #include "stiction/formulation.hpp"
+#include "stiction/newton.hpp"
 #include "stiction/solver.hpp"
 
 namespace bp = boost::python;
@@ -127,6 +128,19 @@ bp::list names() {
 double residualOf(const bp::object& problem, const bp::object& lam) {
   const ContactProblem& p = toObject<ContactProblem>(problem, "residual: problem", "stiction.ContactProblem");
   return residual(p, toVector(lam, "residual: lam", p.numRows()));
+}
+
+// For the tests: Newton's small dense LU (newton.hpp) on any square matrix.
+Eigen::VectorXd smallDenseLuSolve(const bp::object& matrix, const bp::object& rhs) {
+  Eigen::MatrixXd a = toMatrix(matrix, "_small_dense_lu_solve: matrix");
+  if (a.rows() != a.cols() || a.rows() > SmallDenseLU::kMaxRows)
+    throw std::invalid_argument("_small_dense_lu_solve: matrix must be square with at most " +
+                                std::to_string(SmallDenseLU::kMaxRows) + " rows");
+  Eigen::VectorXd x = toVector(rhs, "_small_dense_lu_solve: rhs", a.rows());
+  SmallDenseLU lu;
+  lu.compute(a);
+  lu.solve(x);
+  return x;
 }
 
 ExactLawMeasures exactLawOf(const bp::object& problem, const bp::object& lam, const bp::object& floor) {
@@ -311,6 +325,8 @@ void exposeSolver() {
           "primal and dual feasibility, complementarity, Signorini, maximum dissipation and lift-off "
           "of sliding blocks.");
 
+  bp::def("_small_dense_lu_solve", &smallDenseLuSolve, (bp::arg("matrix"), bp::arg("rhs")),
+          "(for tests) x = matrix^-1 rhs by the Newton solver's small dense LU");
   bp::def("solver_names", &names);
   bp::def("residual", &residualOf, (bp::arg("problem"), bp::arg("lam")),
           "natural-map residual of the De Saxce problem / (1 + ||b||)");

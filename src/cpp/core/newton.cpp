@@ -72,13 +72,98 @@ bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& l
 
 }  // namespace
 
+namespace {
+
+// Below this many rows a plain column loop beats Eigen's general matrix-vector product,
+// whose set-up costs more than a 16 x 16 product (measured: ~250 instructions for 3 x 3).
+constexpr Eigen::Index kPlainProductRows = 32;
+
+// u = A x - b.
+void residualVelocity(const Eigen::MatrixXd& A, const Eigen::VectorXd& x, const Eigen::VectorXd& b,
+                      Eigen::VectorXd& u) {
+  const Eigen::Index m = A.rows();
+  if (m > kPlainProductRows) {
+    u.noalias() = A * x;
+    u -= b;
+    return;
+  }
+  u.resize(m);
+  double* __restrict out = u.data();
+  const double* __restrict bp = b.data();
+  for (Eigen::Index i = 0; i < m; ++i) out[i] = -bp[i];
+  for (Eigen::Index j = 0; j < m; ++j) {
+    const double xj = x[j];
+    const double* __restrict col = A.data() + j * m;
+    for (Eigen::Index i = 0; i < m; ++i) out[i] += col[i] * xj;
+  }
+}
+
+}  // namespace
+
+void SmallDenseLU::compute(Eigen::MatrixXd& a) {
+  // Right-looking elimination with partial pivoting, in place, column by column (the inner
+  // loops run down contiguous columns). A zero pivot is left in place: the solve then gives
+  // non-finite values, which run() reports as a singular Newton system, as Eigen's LU did.
+  const Eigen::Index m = a.rows();
+  pivots_.resize(m);
+  double* d = a.data();
+  for (Eigen::Index k = 0; k < m; ++k) {
+    double* ck = d + k * m;
+    Eigen::Index p = k;
+    double big = std::abs(ck[k]);
+    for (Eigen::Index i = k + 1; i < m; ++i)
+      if (std::abs(ck[i]) > big) {
+        big = std::abs(ck[i]);
+        p = i;
+      }
+    pivots_[k] = static_cast<int>(p);
+    if (p != k)
+      for (Eigen::Index j = 0; j < m; ++j) std::swap(d[j * m + k], d[j * m + p]);
+    const double pivot = ck[k];
+    if (pivot != 0.0) {
+      const double inv = 1.0 / pivot;
+      for (Eigen::Index i = k + 1; i < m; ++i) ck[i] *= inv;
+    }
+    for (Eigen::Index j = k + 1; j < m; ++j) {
+      double* __restrict cj = d + j * m;
+      const double* __restrict l = ck;
+      const double f = cj[k];
+      if (f == 0.0) continue;
+      for (Eigen::Index i = k + 1; i < m; ++i) cj[i] -= l[i] * f;
+    }
+  }
+  factor_ = &a;
+}
+
+void SmallDenseLU::solve(Eigen::VectorXd& x) const {
+  const Eigen::MatrixXd& a = *factor_;
+  const Eigen::Index m = a.rows();
+  const double* d = a.data();
+  double* __restrict v = x.data();
+  for (Eigen::Index k = 0; k < m; ++k)
+    if (pivots_[k] != k) std::swap(v[k], v[pivots_[k]]);
+  for (Eigen::Index k = 0; k < m; ++k) {  // L y = P x, unit diagonal
+    const double vk = v[k];
+    if (vk == 0.0) continue;
+    const double* __restrict ck = d + k * m;
+    for (Eigen::Index i = k + 1; i < m; ++i) v[i] -= ck[i] * vk;
+  }
+  for (Eigen::Index k = m - 1; k >= 0; --k) {  // U x = y
+    const double* __restrict ck = d + k * m;
+    v[k] /= ck[k];
+    const double vk = v[k];
+    for (Eigen::Index i = 0; i < k; ++i) v[i] -= ck[i] * vk;
+  }
+}
+
 void NewtonSolver::evaluate(const ContactProblem& problem, const Eigen::VectorXd& lam, bool jacobian) {
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
   const Eigen::MatrixXd& A = problem.delassus().dense();
   const Eigen::Index m = problem.numRows();
-  u_.noalias() = A * lam;
-  u_ -= problem.b();
+  // With the Jacobian, u_ is the one the last evaluation at this same lam left (run() asks
+  // for the Jacobian only at the accepted iterate, evaluated just before).
+  if (!jacobian) residualVelocity(A, lam, problem.b(), u_);
   F_.resize(m);
   if (jacobian) J_.setZero(m, m);
   for (std::size_t i = 0; i < cons.size(); ++i) {
@@ -129,11 +214,21 @@ void NewtonSolver::evaluate(const ContactProblem& problem, const Eigen::VectorXd
         F_.segment<3>(o) = lam.segment<3>(o) - p;
         if (jacobian) {
           const Eigen::Matrix3d JP = coneProjectionJacobian<3>(z, mu);
-          // rows of (I + D_s) A, D_s = d(E s)/du: the normal row gains mu u_t^T A_t / |u_t|
-          J_.middleRows(o, 3).noalias() = kap * JP * A.middleRows(o, 3);
+          // rows of (I + D_s) A, D_s = d(E s)/du: the normal row gains mu u_t^T A_t / |u_t|,
+          // so the three rows are G A_(rows o..o+2) with G = kap JP (I + mu e_n [u_t/|u_t|, 0]).
+          Eigen::Matrix3d G = kap * JP;
           if (utn > 0.0) {
-            row_.noalias() = (u_[o] / utn) * A.row(o) + (u_[o + 1] / utn) * A.row(o + 1);
-            J_.middleRows(o, 3).noalias() += (kap * mu) * JP.col(2) * row_;
+            G.col(0) += (kap * mu * u_[o] / utn) * JP.col(2);
+            G.col(1) += (kap * mu * u_[o + 1] / utn) * JP.col(2);
+          }
+          // one pass over A's three rows (column-major: three neighbours per column)
+          const double* a = A.data() + o;
+          double* out = J_.data() + o;
+          for (Eigen::Index j = 0; j < m; ++j, a += m, out += m) {
+            const double a0 = a[0], a1 = a[1], a2 = a[2];
+            out[0] = G(0, 0) * a0 + G(0, 1) * a1 + G(0, 2) * a2;
+            out[1] = G(1, 0) * a0 + G(1, 1) * a1 + G(1, 2) * a2;
+            out[2] = G(2, 0) * a0 + G(2, 1) * a1 + G(2, 2) * a2;
           }
           J_.block(o, o, 3, 3) += Eigen::Matrix3d::Identity() - JP;
         }
@@ -177,9 +272,15 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
     // (dF + eps I) d = -F, eps ~ ||F|| relative to the size of lambda.
     const double eps = std::min(1e-2, std::max(1e-14, f_norm / (1.0 + lam.norm())));
     J_.diagonal().array() += eps;
-    lu_.compute(J_);
-    step_ = lu_.solve(F_);
-    step_ = -step_;
+    if (m <= SmallDenseLU::kMaxRows) {
+      small_lu_.compute(J_);  // (J_ is rebuilt before its next use)
+      step_ = -F_;
+      small_lu_.solve(step_);
+    } else {
+      lu_.compute(J_);
+      step_ = lu_.solve(F_);
+      step_ = -step_;
+    }
     if (!step_.allFinite()) {
       message = "singular Newton system";
       break;
@@ -190,20 +291,18 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
     double reference = f_norm;
     for (double h : history) reference = std::max(reference, h);
     double t = 1.0, best_norm = kInf, best_t = 0.0;
+    bool best_is_last = false;  // u_ and F_ hold the best trial's values
     trial_.resize(m);
     for (int ls = 0; ls < 20; ++ls, t *= 0.5) {
       trial_ = lam + t * step_;
       evaluate(problem, trial_, false);
       const double n = F_.norm();
-      if (n < best_norm) {
+      best_is_last = n < best_norm;
+      if (best_is_last) {
         best_norm = n;
         best_t = t;
       }
-      if (n <= (1.0 - 1e-4 * t) * reference) {
-        best_t = t;
-        best_norm = n;
-        break;
-      }
+      if (n <= (1.0 - 1e-4 * t) * reference) break;
     }
     if (!(best_norm < reference)) {
       message = "stalled (no descent along the Newton direction)";
@@ -211,9 +310,14 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
       break;
     }
     history[step % kHistory] = f_norm;
-    lam += best_t * step_;
-    evaluate(problem, lam, false);
-    f_norm = F_.norm();
+    if (best_is_last) {
+      lam.swap(trial_);  // u_ and F_ are already this iterate's
+      f_norm = best_norm;
+    } else {
+      lam += best_t * step_;
+      evaluate(problem, lam, false);
+      f_norm = F_.norm();
+    }
   }
   return step;
 }
