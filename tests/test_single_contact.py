@@ -181,3 +181,34 @@ def test_zero_friction_spatial_contact(rng, solver):
     r = solve1(A, b, Constraint.spatial_friction(0.0), solver)
     np.testing.assert_allclose(r.lam[:2], 0.0, atol=1e-12)
     assert r.lam[2] == pytest.approx(b[2] / A[2, 2], rel=1e-11)
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("guess", ["near", "opposite", "tangent"])
+def test_slip_from_a_sliding_guess_is_exact(seed, guess):
+    """Gauss-Seidel hands the local solve the block's previous force; when that force slides,
+    the slip direction is first sought by Newton from its direction (local_solve.cpp), and the
+    quartic is solved only if that fails. From near the answer, from the opposite direction and
+    from a purely tangential guess, the answer meets every Coulomb condition to round-off and
+    is one of the brute-force scan's slip solutions."""
+    rng = np.random.default_rng(seed)
+    A = spd(rng, 3, cond=20.0)
+    mu = 0.3
+    b = np.array([*rng.standard_normal(2) * 3.0, 1.0])
+    lam_hat = np.linalg.solve(A, b)
+    if lam_hat[2] > 0 and np.linalg.norm(lam_hat[:2]) <= mu * lam_hat[2]:
+        pytest.skip("this draw sticks")
+    sols = all_slip_solutions(A, b, mu)
+    assert sols, "the scan found no slip solution"
+    exact = sols[0]
+    start = {"near": exact * (1 + 1e-3) + np.array([1e-3, -1e-3, 0.0]) * np.linalg.norm(exact),
+             "opposite": np.array([-exact[0], -exact[1], exact[2]]),
+             "tangent": np.array([exact[0], exact[1], 0.0])}[guess]
+    p = ContactProblem(np.asfortranarray(A), b, [Constraint.spatial_friction(mu)])
+    r = stiction.solve(p, solver="nsgs", tol=1e-13, max_iter=50, warm_start=start)
+    assert r.converged, (r.residual, r.message)
+    viol = coulomb_slip_violation(A, b, mu, r.lam)
+    assert viol["on_cone"] < 1e-11 and viol["u_n"] < 1e-11 and viol["direction"] < 1e-11, viol
+    assert min(np.linalg.norm(s - r.lam) for s in sols) < 1e-7 * np.linalg.norm(r.lam)
+    if guess == "near":
+        assert r.iterations == 1  # one sweep: the local solve is exact

@@ -101,6 +101,49 @@ ContactState solveSpatialBlock(const Eigen::Matrix3d& G, const Eigen::Matrix3d& 
   // f(th) = v_0 sin th - v_1 cos th = 0  (v parallel to the direction); with
   // t = tan(th/2) and a factor (1 + t^2)^2 it becomes this quartic.
   const double qr = q[0] - r[1];
+  const Eigen::Vector3d lam_prev = Q * lam;
+  // f(th) = v_0 sin th - v_1 cos th and its derivative.
+  auto f_and_df = [&](double th, double& f, double& df) {
+    const double C = std::cos(th), S = std::sin(th);
+    f = p[0] * S - p[1] * C + qr * C * S + r[0] * S * S - q[1] * C * C;
+    df = p[0] * C + p[1] * S + qr * (C * C - S * S) + 2.0 * (r[0] + q[1]) * S * C;
+  };
+  // The slip force for direction th if it is one (a > 0 and u_t opposite to lambda_t).
+  auto slipAt = [&](double th, Eigen::Vector3d& cand, bool& valid) {
+    const double C = std::cos(th), S = std::sin(th);
+    const Eigen::Vector3d w(mu * C, mu * S, 1.0);
+    const double a = Gr.row(2).dot(w);
+    if (!(a > 0.0)) return false;
+    cand = (-cn / a) * w;
+    const Eigen::Vector3d u = Gr * cand + cr;
+    const double along = u[0] * C + u[1] * S;  // must be <= 0: u_t opposite to lambda_t
+    valid = along <= 1e-9 * norm2(u[0], u[1]);
+    return true;
+  };
+  // Fast path: Newton on f from the direction of the block's previous force, which slips
+  // the same way from one Gauss-Seidel sweep to the next. A root found there with a valid
+  // direction is an exact slip solution (u_n = 0 and u_t against lambda_t by construction),
+  // so the quartic (an eigenvalue problem, most of a sweep's time) is only needed when this
+  // fails. The residual check guards against a root that rounding made approximate.
+  if (lam_prev[2] > 0.0 && norm2(lam_prev[0], lam_prev[1]) > 0.0) {
+    double th = std::atan2(lam_prev[1], lam_prev[0]);
+    bool converged = false;
+    for (int it = 0; it < 12 && !converged; ++it) {
+      double f, df;
+      f_and_df(th, f, df);
+      if (!(std::abs(df) > 0.0)) break;
+      const double step = f / df;
+      th -= step;
+      converged = std::abs(step) <= 1e-12;
+    }
+    Eigen::Vector3d cand;
+    bool valid = false;
+    if (converged && std::isfinite(th) && slipAt(th, cand, valid) && valid &&
+        blockResidual<3>(Gr, cr, mu, cand) <= 1e-13 * (cand.norm() * (1.0 + Gr.norm()) + cr.norm())) {
+      lam = Q.transpose() * cand;
+      return ContactState::kSlip;
+    }
+  }
   const double k[5] = {-p[1] - q[1], 2.0 * p[0] + 2.0 * qr, 4.0 * r[0] + 2.0 * q[1],
                        2.0 * p[0] - 2.0 * qr, p[1] - q[1]};
   double roots[4];
@@ -112,7 +155,6 @@ ContactState solveSpatialBlock(const Eigen::Matrix3d& G, const Eigen::Matrix3d& 
   for (double ki : k) kscale = std::max(kscale, std::abs(ki));
   if (std::abs(k[4]) <= 1e-10 * kscale) thetas[n_th++] = M_PI;  // root at t = infinity
 
-  const Eigen::Vector3d lam_prev = Q * lam;
   Eigen::Vector3d best = Eigen::Vector3d::Zero();
   double best_res = kInf, best_dist = kInf;
   bool have_valid = false;
