@@ -76,7 +76,6 @@ def test_admm_hands_over_to_newton_when_its_best_residual_stops_improving():
 
 
 @pytest.mark.parametrize("name", ["BoxesStack--BoxesStack1-i100000-32.hdf5.dat",
-                                  "Confeti--Confeti-ex13-Fc3D-SBM.dat",
                                   "OneObject--OneObject-i100000-316.hdf5.dat",
                                   "PerioBox--LMGC_100_PR_PerioBox-i00361-60-03000.hdf5"])
 def test_medium_problems_hand_a_stalled_gauss_seidel_to_newton(name):
@@ -88,8 +87,11 @@ def test_medium_problems_hand_a_stalled_gauss_seidel_to_newton(name):
     assert r.stages[0].outcome == "stalled"
 
 
-@pytest.mark.parametrize("name", ["BoxStacks--Box_Stacks-i0122-82-5.hdf5", "NESpheres--NESpheres_30_1.dat"])
+@pytest.mark.parametrize("name", ["BoxStacks--Box_Stacks-i0122-82-5.hdf5", "NESpheres--NESpheres_30_1.dat",
+                                  "Confeti--Confeti-ex13-Fc3D-SBM.dat"])
 def test_medium_well_conditioned_problems_are_solved_by_gauss_seidel_alone(name):
+    """BoxStacks 32 sweeps, NESpheres 1, Confeti-ex13 45: its 10-sweep rate at sweep 15 predicts
+    160-320 more, under the hand-over's max(50, m) = 321 (Newton from there: 9.5 ms, NSGS 1.2)."""
     _, r = solve(name)
     assert r.converged and stage_names(r) == ["nsgs"], r.stages
 

@@ -530,11 +530,15 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
   double best_res = std::numeric_limits<double>::infinity();
   std::string best_stage = "initial guess";  // (short: no allocation)
   bool initial_scored = false;
-  // NSGS hands over when its rate predicts more sweeps than ~6 dense Newton
-  // steps would cost (measured on FCLib: one step ~ m/12 sweeps; Newton
-  // typically needs 5-30 steps).
+  // NSGS hands over when its rate predicts more sweeps than a few dense Newton steps
+  // would cost. A step's LU is ~m^3/3 multiply-adds against a sweep's ~m^2, so a step is
+  // ~m/3 sweeps; Newton typically needs 5-30 steps. (Before the local solve's warm slip
+  // search a sweep cost ~3x more and this was m/2.) Measured on FCLib: Confeti-ex13 (321
+  // rows) is predicted 160-320 more sweeps at sweep 15 and converges at 45 (1.2 ms, where
+  // handing over at m/2 took 9.5 ms); PerioBox's Newton from a later NSGS iterate takes more
+  // steps (4.4 -> 8.2 ms); 2m cost PerioBox 10.4 ms.
   const double m = static_cast<double>(problem.numRows());
-  const double switch_after = std::max(50.0, m / 2.0);
+  const double switch_after = std::max(50.0, m);
   auto score = [&](const Eigen::VectorXd& x) {
     problem.delassus().multiply(x, u_ws_);
     u_ws_ -= problem.b();
