@@ -14,6 +14,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
 #include <Eigen/SparseCholesky>
+#include <Eigen/SparseLU>
 
 #include "stiction/admm.hpp"
 #include "stiction/block_cholesky.hpp"
@@ -58,6 +59,19 @@ class NewtonSolver final : public ContactSolver {
   Eigen::MatrixXd J_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
   SmallDenseLU small_lu_;
+
+  // The sparse path (a sparse A above SmallDenseLU::kMaxRows rows).
+  /// The Jacobian's pattern (A's, widened to whole block rows, plus the diagonal blocks).
+  void prepareSparse(const ContactProblem& problem);
+  /// Js_'s values from A and the blocks' G and D that evaluate() stored.
+  void fillSparseJacobian(const ContactProblem& problem);
+  bool sparse_ = false;
+  Eigen::SparseMatrix<double> Js_;
+  std::vector<int> row_block_, diagonal_at_;
+  std::vector<Eigen::Index> packed_;
+  std::vector<double> block_G_, block_D_;
+  Eigen::VectorXd column_;
+  Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> sparse_lu_;
 };
 
 /// The default: picks its stages by size and sparsity, and within those by how the stages
@@ -73,7 +87,7 @@ class NewtonSolver final : public ContactSolver {
 ///   factorization) until it converges or its best residual stops improving, then a few
 ///   Newton steps from the best iterate if it is nearly there; warm-started, at most
 ///   kWarmSweeps NSGS sweeps first.
-/// - Otherwise NSGS while its rate promises to finish within ~m/2 sweeps and does not
+/// - Otherwise NSGS while its rate promises to finish within ~m sweeps and does not
 ///   decelerate; then Newton from the NSGS iterate (medium problems, <= kAdmmAboveRows rows)
 ///   or ADMM as above (large dense ones).
 /// - Then Newton from the initial guess; if all that fails, alternating chunks of NSGS and
