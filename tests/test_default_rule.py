@@ -36,27 +36,44 @@ def test_the_bundled_set_has_the_problems_the_rule_was_measured_on():
     assert len(CAPSULES) == 5 and KAPLAS in FCLIB_FILES and SPHERES in FCLIB_FILES
 
 
+def stored_entries(problem):
+    return int(np.count_nonzero(np.asarray(problem.A)))
+
+
 @pytest.mark.parametrize("symmetrised", [False, True], ids=["stored", "symmetrised"])
-@pytest.mark.parametrize("name", CAPSULES + [KAPLAS, SPHERES])
-def test_large_sparse_problems_go_to_admm_without_a_gauss_seidel_prelude(name, symmetrised):
-    """Capsules (648-888 rows), KaplasTower (1710) and Spheres (1068), 0.6-4 % nonzero: before,
-    an NSGS prelude handed over to Newton (23-50 dense LU steps, then again from the initial
-    guess) or ran 1056 sweeps (KaplasTower); now ADMM, factorized sparsely, solves them alone."""
+@pytest.mark.parametrize("name", CAPSULES + [SPHERES, "SpheresBox--spheres-in-a-box-98-i10000-256-10.hdf5"])
+def test_cold_large_sparse_problems_with_few_entries_are_solved_by_sparse_newton(name, symmetrised):
+    """Capsules (648-888 rows, 8.6-12.4k entries), Spheres (1068, 7.2k) and SpheresBox (768,
+    17k): Newton from the guess with a sparse Jacobian and LU, before any ADMM (8-30 ms to 1e-8
+    where ADMM took 13-42 ms and stalled on SpheresBox)."""
     problem, r = solve(name, symmetrised=symmetrised)
     assert problem.num_rows > 384 and density(problem) <= 0.1
+    assert stored_entries(problem) <= stiction._core.DEFAULT_SPARSE_NEWTON_ENTRIES
+    assert r.converged and r.relative_residual <= 1e-8, r.message
+    assert stage_names(r) == ["newton"], r.stages
+    assert r.message == "converged (newton)"
+
+
+@pytest.mark.parametrize("symmetrised", [False, True], ids=["stored", "symmetrised"])
+def test_large_sparse_problems_with_many_entries_go_to_admm_without_a_gauss_seidel_prelude(symmetrised):
+    """KaplasTower (1710 rows, 117k entries, 4 % nonzero): its sparse LU fills in (Newton 255 ms),
+    so ADMM, factorized sparsely, solves it alone (~80 ms; an NSGS prelude ran 1056 sweeps)."""
+    problem, r = solve(KAPLAS, symmetrised=symmetrised)
+    assert problem.num_rows > 384 and density(problem) <= 0.1
+    assert stored_entries(problem) > stiction._core.DEFAULT_SPARSE_NEWTON_ENTRIES
     assert r.converged and r.relative_residual <= 1e-8, r.message
     assert stage_names(r) == ["admm"], r.stages
     assert r.stages[0].outcome == "converged" and r.message == "converged (admm)"
 
 
 def test_a_warm_started_large_problem_tries_a_few_gauss_seidel_sweeps_before_admm():
-    """Warm-started (the simulator's previous step): at most 10 NSGS sweeps first; from the
-    solution itself that is one sweep, from the previous step's solution stored in the file
-    (Capsules-i97, relative residual 4e-3) the sweeps stop at 10 and ADMM finishes."""
+    """Warm-started (the simulator's previous step): at most 10 NSGS sweeps first, then ADMM, not
+    Newton; from the solution itself that is one sweep, from the previous step's solution stored
+    in the file (Capsules-i97, relative residual 4e-3) the sweeps stop at 10 and ADMM finishes."""
     P = fclib.load(FCLIB_DIR / "Capsules--Capsules-i97-269.hdf5")
     problem = P.problem()
     cold = stiction.solve(problem, tol=1e-8, max_iter=5000)
-    assert cold.converged and stage_names(cold) == ["admm"]
+    assert cold.converged and stage_names(cold) == ["newton"]
     again = stiction.solve(problem, tol=1e-8, max_iter=5000, warm_start=cold.lam)
     assert again.converged and stage_names(again) == ["nsgs"] and again.iterations <= 2, again.stages
     warm = stiction.solve(problem, tol=1e-8, max_iter=5000, warm_start=P.guess)
@@ -65,13 +82,16 @@ def test_a_warm_started_large_problem_tries_a_few_gauss_seidel_sweeps_before_adm
 
 
 def test_admm_hands_over_to_newton_when_its_best_residual_stops_improving():
-    """SpheresBox (768 rows, cond ~1e9): ADMM stays near its starting residual; its stall test
-    stops it after the 400-iteration window and Newton from the initial guess solves it."""
-    _, r = solve("SpheresBox--spheres-in-a-box-98-i10000-256-10.hdf5")
+    """SpheresBox (768 rows, cond ~1e9) warm-started from zero (the simulator's path: sweeps, then
+    ADMM): ADMM stays near its starting residual; its stall test stops it after the
+    400-iteration window and Newton from the initial guess solves it."""
+    P = fclib.load(FCLIB_DIR / "SpheresBox--spheres-in-a-box-98-i10000-256-10.hdf5")
+    problem = P.problem()
+    r = stiction.solve(problem, tol=1e-8, max_iter=5000, time_limit=60.0, warm_start=np.zeros(problem.num_rows))
     assert r.converged and r.relative_residual <= 1e-8
     names = stage_names(r)
-    assert names[0] == "admm" and names[-1] == "newton (from the initial guess)", r.stages
-    assert r.stages[0].outcome == "stalled" and r.stages[0].iterations <= 500
+    assert names == ["nsgs", "admm", "newton (from the initial guess)"], r.stages
+    assert r.stages[1].outcome == "stalled" and r.stages[1].iterations <= 500
     assert r.stages[-1].outcome == "converged"
 
 

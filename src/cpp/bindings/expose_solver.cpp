@@ -325,6 +325,8 @@ void exposeSolver() {
           "primal and dual feasibility, complementarity, Signorini, maximum dissipation and lift-off "
           "of sliding blocks.");
 
+  // The default's size bound for trying sparse Newton first (tests/test_default_rule.py).
+  bp::scope().attr("DEFAULT_SPARSE_NEWTON_ENTRIES") = static_cast<long>(DefaultSolver::kSparseNewtonEntries);
   bp::def("_small_dense_lu_solve", &smallDenseLuSolve, (bp::arg("matrix"), bp::arg("rhs")),
           "(for tests) x = matrix^-1 rhs by the Newton solver's small dense LU");
   bp::def("solver_names", &names);

@@ -99,6 +99,13 @@ void residualVelocity(const Eigen::MatrixXd& A, const Eigen::VectorXd& x, const 
   }
 }
 
+// Entries A stores (a dense A: its nonzeros).
+Eigen::Index storedEntries(const ContactProblem& problem) {
+  if (const Eigen::SparseMatrix<double>* S = problem.delassus().sparse()) return S->nonZeros();
+  const Eigen::MatrixXd& A = problem.delassus().dense();
+  return static_cast<Eigen::Index>((A.array() != 0.0).count());
+}
+
 }  // namespace
 
 void SmallDenseLU::compute(Eigen::MatrixXd& a) {
@@ -682,8 +689,9 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
   // ~m/3 sweeps; Newton typically needs 5-30 steps. (Before the local solve's warm slip
   // search a sweep cost ~3x more and this was m/2.) Measured on FCLib: Confeti-ex13 (321
   // rows) is predicted 160-320 more sweeps at sweep 15 and converges at 45 (1.2 ms, where
-  // handing over at m/2 took 9.5 ms); PerioBox's Newton from a later NSGS iterate takes more
-  // steps (4.4 -> 8.2 ms); 2m cost PerioBox 10.4 ms.
+  // handing over at m/2 took 9.5 ms). PerioBox (180 rows, rank 72) hands over at sweep 30
+  // instead of 23; its Newton from there took 10-27 steps in builds that differ only in
+  // rounding (3.3-8.2 ms, against 4.4); with 2m, 35 steps (10.4 ms).
   const double m = static_cast<double>(problem.numRows());
   const double switch_after = std::max(50.0, m);
   auto score = [&](const Eigen::VectorXd& x) {
@@ -725,7 +733,7 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
   // A stage found lambda where the tolerance cannot be verified in double
   // precision: no other stage will do better at that scale; the verdict says so.
   auto unresolvable = [&](const std::string& stage_msg) { return stage_msg == kUnresolvableMessage; };
-  bool admm_started = false, use_admm = false;
+  bool admm_started = false, use_admm = false, newton_from_initial = false;
   Eigen::VectorXd admm_state;
   // 0. A guess with every contact closed and sticking: the all-stick solution, if it is one.
   if (budget > 0 && problem.numRows() > 0 && strictlyInsideCones(problem, lam)) {
@@ -816,6 +824,19 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
         if (unresolvable(msg) || msg == "time limit reached") return finish(msg + " (nsgs)");
         keep_best(lam, "nsgs");
       }
+      // 1b'. Cold large sparse problems with few stored entries: Newton from the guess, with
+      //      its sparse Jacobian and LU (run()), before ADMM. Measured on FCLib to 1e-8: the
+      //      Capsules 8-30 ms (ADMM 18-42), Spheres 10 ms (13), SpheresBox 80 ms (ADMM stalls
+      //      after 25 ms, then the same Newton); KaplasTower (117k entries) 255 ms against
+      //      ADMM's 81: the LU fills in, hence the bound on A's entries. Warm-started solves
+      //      (a simulation's step) keep their path: sweeps, then ADMM.
+      if (settings.warm_start == WarmStart::kNone && storedEntries(problem) <= kSparseNewtonEntries) {
+        newton_from_initial = true;
+        if (newton_from_here(50, "newton")) return finish("converged (newton)");
+        if (unresolvable(newton_msg)) return finish(newton_msg + " (newton)");
+        keep_best(lam, "newton");
+        if (out_of_time()) return finish(newton_msg + " (newton)");
+      }
       // 1b. Large sparse problems: ADMM alone, no Gauss-Seidel prelude. With A <= 10 %
       //     nonzero ADMM factorizes and solves sparsely (admm.cpp): on the FCLib problems of
       //     this kind (648-1710 rows, 0.6-4 % nonzero) it reaches 1e-8 in 20-130 ms where the
@@ -858,7 +879,7 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
     }
     // Newton from the initial guess: on some problems the NSGS or ADMM iterate sits in
     // a region where the line search stalls and the guess does not (SpheresBox).
-    if (!out_of_time()) {
+    if (!out_of_time() && !newton_from_initial) {
       lam = initial_;
       if (newton_from_here(50, "newton (from the initial guess)"))
         return finish("converged (newton from the initial guess)");

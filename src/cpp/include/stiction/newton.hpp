@@ -104,6 +104,9 @@ class DefaultSolver final : public ContactSolver {
   static constexpr Eigen::Index kAdmmAboveRows = 384;
   /// ADMM's stall horizon, in iterations per row (admm.hpp: switch_after).
   static constexpr double kAdmmHorizonPerRow = 10.0;
+  /// A cold large sparse problem whose A stores at most this many entries tries Newton (sparse
+  /// Jacobian and LU) before ADMM (measured: docs/solvers.md, "The default's rule").
+  static constexpr Eigen::Index kSparseNewtonEntries = 50000;
   /// Gauss-Seidel sweeps tried before ADMM on a warm-started large sparse problem.
   static constexpr int kWarmSweeps = 10;
   /// Newton steps from the best iterate after ADMM stalls, if its residual is within
