@@ -131,3 +131,29 @@ def test_newton_small_lu_solves_systems_that_need_pivoting(m):
         assert not np.isfinite(stiction._core._small_dense_lu_solve(a, np.arange(m, dtype=float))).all()
     with pytest.raises(ValueError, match="at most 192 rows"):
         stiction._core._small_dense_lu_solve(np.eye(193), np.ones(193))
+
+
+LU_AGAINST_NUMPY = """
+import sys, numpy as np, stiction
+worst = 0.0
+for m in (2, 5, 27, 64, 150):
+    rng = np.random.default_rng(m)
+    a = rng.standard_normal((m, m)); a[np.diag_indices(m)] = 0.0
+    x = rng.standard_normal(m)
+    got = stiction._core._small_dense_lu_solve(a, a @ x)
+    worst = max(worst, np.linalg.norm(got - x) / (np.linalg.cond(a) * np.linalg.norm(x)))
+print(worst)
+"""
+
+
+@pytest.mark.parametrize("kernels", ["0", "1"])
+def test_newton_small_lu_is_the_same_with_and_without_vector_kernels(kernels):
+    """The LU's column updates run in an AVX2/FMA kernel where the processor has it
+    (STICTION_VECTOR_KERNELS=0: the portable loop); both solve to rounding."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, STICTION_VECTOR_KERNELS=kernels)
+    out = subprocess.run([sys.executable, "-c", LU_AGAINST_NUMPY], capture_output=True, text=True, env=env, check=True)
+    assert float(out.stdout) <= 1e-14, out.stdout

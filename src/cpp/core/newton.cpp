@@ -9,6 +9,10 @@
 #include "stiction/admm.hpp"
 #include "stiction/cone.hpp"
 #include "stiction/proxqp_warm_start.hpp"
+#include "stiction/vector_kernels.hpp"
+#ifdef STICTION_X86_KERNELS
+#include <immintrin.h>
+#endif
 
 namespace stiction {
 
@@ -108,6 +112,35 @@ Eigen::Index storedEntries(const ContactProblem& problem) {
 
 }  // namespace
 
+// The LU's update of the columns right of pivot k: c_j[k+1:] -= l[k+1:] c_j[k] (l = column k).
+void eliminatePortable(double* d, Eigen::Index m, Eigen::Index k) {
+  const double* __restrict l = d + k * m;
+  for (Eigen::Index j = k + 1; j < m; ++j) {
+    double* __restrict cj = d + j * m;
+    const double f = cj[k];
+    if (f == 0.0) continue;
+    for (Eigen::Index i = k + 1; i < m; ++i) cj[i] -= l[i] * f;
+  }
+}
+
+#ifdef STICTION_X86_KERNELS
+// The same with four rows per instruction (CubesH8's 27 x 27 Newton system: its LU was most
+// of the solve). Raw pointers and intrinsics only (docs/development.md).
+__attribute__((target("avx2,fma"))) void eliminateAvx2(double* d, Eigen::Index m, Eigen::Index k) {
+  const double* l = d + k * m;
+  for (Eigen::Index j = k + 1; j < m; ++j) {
+    double* cj = d + j * m;
+    const double f = cj[k];
+    if (f == 0.0) continue;
+    const __m256d vf = _mm256_set1_pd(f);
+    Eigen::Index i = k + 1;
+    for (; i + 4 <= m; i += 4)
+      _mm256_storeu_pd(cj + i, _mm256_fnmadd_pd(_mm256_loadu_pd(l + i), vf, _mm256_loadu_pd(cj + i)));
+    for (; i < m; ++i) cj[i] -= l[i] * f;
+  }
+}
+#endif
+
 void SmallDenseLU::compute(Eigen::MatrixXd& a) {
   // Right-looking elimination with partial pivoting, in place, column by column (the inner
   // loops run down contiguous columns). A zero pivot is left in place: the solve then gives
@@ -115,6 +148,7 @@ void SmallDenseLU::compute(Eigen::MatrixXd& a) {
   const Eigen::Index m = a.rows();
   pivots_.resize(m);
   double* d = a.data();
+  const bool vector = vectorKernels();
   for (Eigen::Index k = 0; k < m; ++k) {
     double* ck = d + k * m;
     Eigen::Index p = k;
@@ -132,13 +166,13 @@ void SmallDenseLU::compute(Eigen::MatrixXd& a) {
       const double inv = 1.0 / pivot;
       for (Eigen::Index i = k + 1; i < m; ++i) ck[i] *= inv;
     }
-    for (Eigen::Index j = k + 1; j < m; ++j) {
-      double* __restrict cj = d + j * m;
-      const double* __restrict l = ck;
-      const double f = cj[k];
-      if (f == 0.0) continue;
-      for (Eigen::Index i = k + 1; i < m; ++i) cj[i] -= l[i] * f;
+#ifdef STICTION_X86_KERNELS
+    if (vector) {
+      eliminateAvx2(d, m, k);
+      continue;
     }
+#endif
+    eliminatePortable(d, m, k);
   }
   factor_ = &a;
 }

@@ -8,9 +8,9 @@
 #include <string>
 #include <unordered_map>
 
-#if defined(__x86_64__) && defined(__GNUC__)
+#include "stiction/vector_kernels.hpp"
+#ifdef STICTION_X86_KERNELS
 #include <immintrin.h>
-#define STICTION_X86_KERNELS 1
 #endif
 
 #include <pinocchio/algorithm/cholesky.hpp>
@@ -157,24 +157,6 @@ void partOperator(SystemWork& w) {
     w.A.triangularView<Eigen::StrictlyUpper>() = w.A.transpose();
   }
 }
-
-#ifdef STICTION_X86_KERNELS
-// AVX2 and FMA on this processor, and not turned off (STICTION_VECTOR_KERNELS=0: the portable
-// loops, to compare with)
-bool vectorKernels() {
-  static const bool use = [] {
-    const char* env = std::getenv("STICTION_VECTOR_KERNELS");
-    if (env != nullptr && std::strcmp(env, "0") == 0) return false;
-    if (env != nullptr && std::strcmp(env, "1") != 0 && env[0] != '\0')
-      throw std::invalid_argument(std::string("STICTION_VECTOR_KERNELS must be 0 or 1, got '") + env + "'");
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-  }();
-  return use;
-}
-#else
-bool vectorKernels() { return false; }
-#endif
 
 // W_s = D^-1/2 U^-1 J_s^T for every part, so that A = sum_s W_s^T W_s (symmetric by construction);
 // returns the entries of the parts' dense shares, sum of n_s^2.

@@ -83,10 +83,11 @@ class NewtonSolver final : public ContactSolver {
 ///   factorization (stickingStep); kept only if the stopping test passes.
 /// - Small problems (<= kNewtonFirstRows rows: a robot's feet, a box's corners): Newton
 ///   first, then Newton from ProxQP's facetized-cone solution if that failed.
-/// - Large sparse problems (> kAdmmAboveRows rows, <= 10 % nonzero): ADMM (sparse
-///   factorization) until it converges or its best residual stops improving, then a few
+/// - Large sparse problems (> kAdmmAboveRows rows, <= 10 % nonzero): cold, with at most
+///   kSparseNewtonEntries stored entries, Newton first (sparse Jacobian and LU); then ADMM
+///   (sparse factorization) until it converges or its best residual stops improving, then a few
 ///   Newton steps from the best iterate if it is nearly there; warm-started, at most
-///   kWarmSweeps NSGS sweeps first.
+///   kWarmSweeps NSGS sweeps first, then ADMM.
 /// - Otherwise NSGS while its rate promises to finish within ~m sweeps and does not
 ///   decelerate; then Newton from the NSGS iterate (medium problems, <= kAdmmAboveRows rows)
 ///   or ADMM as above (large dense ones).
