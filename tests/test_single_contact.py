@@ -110,11 +110,9 @@ def all_slip_solutions(A, b, mu, samples=200_000):
     return sols
 
 
-@pytest.mark.parametrize("seed", range(6))
-@pytest.mark.parametrize("solver", ["default", "nsgs", "newton"])
-def test_anisotropic_coupled_slip_is_exact(seed, solver):
-    """General SPD block (tangent-normal coupling, anisotropy): the slip solution meets
-    all Coulomb conditions to round-off and is the one found by a brute-force scan."""
+def sliding_block(seed):
+    """A general SPD block (tangent-normal coupling, anisotropy), mu = 0.3 and a b that slips
+    (a draw that sticks is skipped)."""
     rng = np.random.default_rng(seed)
     A = spd(rng, 3, cond=20.0)
     mu = 0.3
@@ -122,6 +120,15 @@ def test_anisotropic_coupled_slip_is_exact(seed, solver):
     lam_hat = np.linalg.solve(A, b)
     if lam_hat[2] > 0 and np.linalg.norm(lam_hat[:2]) <= mu * lam_hat[2]:
         pytest.skip("this draw sticks")
+    return A, b, mu
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("solver", ["default", "nsgs", "newton"])
+def test_anisotropic_coupled_slip_is_exact(seed, solver):
+    """General SPD block (tangent-normal coupling, anisotropy): the slip solution meets
+    all Coulomb conditions to round-off and is the one found by a brute-force scan."""
+    A, b, mu = sliding_block(seed)
     r = solve1(A, b, Constraint.spatial_friction(mu), solver)
     viol = coulomb_slip_violation(A, b, mu, r.lam)
     assert viol["on_cone"] < 1e-11 and viol["u_n"] < 1e-11 and viol["direction"] < 1e-11, viol
@@ -191,13 +198,7 @@ def test_slip_from_a_sliding_guess_is_exact(seed, guess):
     quartic is solved only if that fails. From near the answer, from the opposite direction and
     from a purely tangential guess, the answer meets every Coulomb condition to round-off and
     is one of the brute-force scan's slip solutions."""
-    rng = np.random.default_rng(seed)
-    A = spd(rng, 3, cond=20.0)
-    mu = 0.3
-    b = np.array([*rng.standard_normal(2) * 3.0, 1.0])
-    lam_hat = np.linalg.solve(A, b)
-    if lam_hat[2] > 0 and np.linalg.norm(lam_hat[:2]) <= mu * lam_hat[2]:
-        pytest.skip("this draw sticks")
+    A, b, mu = sliding_block(seed)
     sols = all_slip_solutions(A, b, mu)
     assert sols, "the scan found no slip solution"
     exact = sols[0]

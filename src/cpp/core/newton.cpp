@@ -422,11 +422,11 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   // dense step.
   sparse_ = m > SmallDenseLU::kMaxRows && AdmmSolver::factorsSparsely(problem);
   if (sparse_) prepareSparse(problem);
-  Eigen::VectorXd diag(m);
-  problem.delassus().diagonal(diag);
+  diagonal_.resize(m);  // (no allocation once sized: the simulator runs this every step)
+  problem.delassus().diagonal(diagonal_);
   kappa_.resize(cons.size());
   for (std::size_t i = 0; i < cons.size(); ++i) {
-    const double tr = diag.segment(off[i], cons[i].size).sum();
+    const double tr = diagonal_.segment(off[i], cons[i].size).sum();
     kappa_[i] = tr > 0.0 ? cons[i].size / tr : 1.0;
   }
   message = "iteration limit reached";

@@ -55,7 +55,7 @@ class NewtonSolver final : public ContactSolver {
   /// F(lam) into F_, and (if jacobian) its generalized Jacobian into J_.
   void evaluate(const ContactProblem& problem, const Eigen::VectorXd& lam, bool jacobian);
 
-  Eigen::VectorXd kappa_, u_, z_, F_, trial_, step_, trial_F_;
+  Eigen::VectorXd kappa_, diagonal_, u_, F_, trial_, step_;
   Eigen::MatrixXd J_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
   SmallDenseLU small_lu_;
