@@ -75,42 +75,12 @@ bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& l
   return true;
 }
 
-}  // namespace
-
-namespace {
-
-// Below this many rows a plain column loop beats Eigen's general matrix-vector product,
-// whose set-up costs more than a 16 x 16 product (measured: ~250 instructions for 3 x 3).
-constexpr Eigen::Index kPlainProductRows = 32;
-
-// u = A x - b.
-void residualVelocity(const Eigen::MatrixXd& A, const Eigen::VectorXd& x, const Eigen::VectorXd& b,
-                      Eigen::VectorXd& u) {
-  const Eigen::Index m = A.rows();
-  if (m > kPlainProductRows) {
-    u.noalias() = A * x;
-    u -= b;
-    return;
-  }
-  u.resize(m);
-  double* __restrict out = u.data();
-  const double* __restrict bp = b.data();
-  for (Eigen::Index i = 0; i < m; ++i) out[i] = -bp[i];
-  for (Eigen::Index j = 0; j < m; ++j) {
-    const double xj = x[j];
-    const double* __restrict col = A.data() + j * m;
-    for (Eigen::Index i = 0; i < m; ++i) out[i] += col[i] * xj;
-  }
-}
-
 // Entries A stores (a dense A: its nonzeros).
 Eigen::Index storedEntries(const ContactProblem& problem) {
   if (const Eigen::SparseMatrix<double>* S = problem.delassus().sparse()) return S->nonZeros();
   const Eigen::MatrixXd& A = problem.delassus().dense();
   return static_cast<Eigen::Index>((A.array() != 0.0).count());
 }
-
-}  // namespace
 
 // The LU's update of the columns right of pivot k: c_j[k+1:] -= l[k+1:] c_j[k] (l = column k).
 void eliminatePortable(double* d, Eigen::Index m, Eigen::Index k) {
@@ -140,6 +110,8 @@ __attribute__((target("avx2,fma"))) void eliminateAvx2(double* d, Eigen::Index m
   }
 }
 #endif
+
+}  // namespace
 
 void SmallDenseLU::compute(Eigen::MatrixXd& a) {
   // Right-looking elimination with partial pivoting, in place, column by column (the inner
@@ -207,13 +179,9 @@ void NewtonSolver::evaluate(const ContactProblem& problem, const Eigen::VectorXd
   // With the Jacobian, u_ is the one the last evaluation at this same lam left (run() asks
   // for the Jacobian only at the accepted iterate, evaluated just before).
   if (!jacobian) {
-    if (sparse_) {
-      u_.resize(m);
-      problem.delassus().multiply(lam, u_);
-      u_ -= problem.b();
-    } else {
-      residualVelocity(A, lam, problem.b(), u_);
-    }
+    u_.resize(m);
+    problem.delassus().multiply(lam, u_);
+    u_ -= problem.b();
   }
   F_.resize(m);
   const bool dense_jacobian = jacobian && !sparse_;
