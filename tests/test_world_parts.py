@@ -355,19 +355,25 @@ def test_a_tower_s_face_gaps_agree_corner_by_corner():
     (9e-16 m at 6 m), corner by corner, and no motion fits such gaps: through Psi / delta^2 they put
     2e-10 m/s of b outside A's range, above the tolerance 1e-10 ||b||, and 7 steps in 1000 could not
     converge. Relative, the four corners of each face agree to 1e-16 m, b lies in the range of J to
-    rounding, and every step converges."""
+    rounding, and every step converges. (The boxes' rounding-level tilt comes and goes: every 15
+    steps or so a face's corners differ by up to 7e-16 m for a step, so the typical spread is
+    measured, every 5 ms; world coordinates would put 4e-16 to 9e-16 m on some upper face at
+    every step.)"""
     from stiction.scene import build_scene
 
     sim = Simulator(build_scene({"name": "tower-64", "array": {"layout": "tower", "count": 64}, "ground": {"mu": 0.5}}))
-    traj = sim.rollout(0.15)
-    assert traj.converged.all(), np.flatnonzero(~traj.converged)
-    d = sim.data
-    active = np.asarray(d.active)
-    assert len(active) == 256
-    faces = np.asarray(d.gaps)[active].reshape(64, 4)  # the ground's 4 corners, then each box's on the one below
-    assert np.abs(faces).max() <= 1e-14
-    spread = faces.max(axis=1) - faces.min(axis=1)
-    assert spread[32:].max() <= 1e-16, spread  # the upper half: 3.2 to 6.4 m
+    upper_spreads = []
+    for _ in range(30):
+        traj = sim.rollout(0.005)
+        assert traj.converged.all(), (traj.t[0], np.flatnonzero(~traj.converged))
+        d = sim.data
+        active = np.asarray(d.active)
+        assert len(active) == 256
+        faces = np.asarray(d.gaps)[active].reshape(64, 4)  # the ground's 4 corners, then each box's on the one below
+        assert np.abs(faces).max() <= 1e-14
+        spread = faces.max(axis=1) - faces.min(axis=1)
+        upper_spreads.append(spread[32:].max())  # the upper half: 3.2 to 6.4 m
+    assert np.median(upper_spreads) <= 1e-16, upper_spreads
     J, b = np.asarray(d.J), np.asarray(d.b)
     coef, *_ = np.linalg.lstsq(J, b, rcond=None)
     assert np.linalg.norm(b - J @ coef) <= 1e-12 * np.linalg.norm(b)

@@ -4,6 +4,7 @@
 #include "convert.hpp"
 #include "expose.hpp"
 #include "stiction/contact_problem.hpp"
+#include "stiction/delassus.hpp"
 
 namespace bp = boost::python;
 
@@ -53,6 +54,23 @@ std::shared_ptr<ContactProblem> makeProblem(const bp::object& A, const bp::objec
   const double tol = toDouble(asymmetry_tolerance, "ContactProblem: asymmetry_tolerance");
   if (!(tol >= 0.0)) throw std::invalid_argument("ContactProblem: asymmetry_tolerance must be >= 0");
   return std::make_shared<ContactProblem>(std::move(op), std::move(bv), std::move(cons), tol);
+}
+
+// For the tests: the verdict's compensated residual A x - b (compensated.hpp) by the operator a
+// problem would hold: dense, scipy.sparse (scattered), or scipy.sparse declared symmetric (gathered
+// by columns, as the simulator's A).
+Eigen::VectorXd compensatedResidualOf(const bp::object& A, const bp::object& x, const bp::object& b,
+                                      bool symmetric) {
+  std::shared_ptr<DelassusOperator> op;
+  if (PyObject_HasAttrString(A.ptr(), "tocsc") && PyObject_HasAttrString(A.ptr(), "nnz"))
+    op = std::make_shared<SparseDelassus>(toSparse(A), symmetric);
+  else
+    op = std::make_shared<DenseDelassus>(toMatrix(A, "_compensated_residual: A"));
+  const Eigen::VectorXd xv = toVector(x, "_compensated_residual: x", op->rows());
+  const Eigen::VectorXd bv = toVector(b, "_compensated_residual: b", op->rows());
+  Eigen::VectorXd y(op->rows());
+  op->compensatedResidual(xv, bv, y);
+  return y;
 }
 
 Constraint bilateral(const bp::object& rows) {
@@ -145,6 +163,9 @@ void exposeProblem() {
       .add_property("num_blocks", &ContactProblem::numBlocks)
       .add_property("asymmetry", &ContactProblem::asymmetry, "max|A - A^T| / max|A|")
       .def("set_b", &setB, bp::arg("b"), "replace b (same size), keeping A");
+  bp::def("_compensated_residual", &compensatedResidualOf,
+          (bp::arg("A"), bp::arg("x"), bp::arg("b"), bp::arg("symmetric") = false),
+          "(for tests) A x - b as the verdict's compensated stage computes it");
 }
 
 }  // namespace python

@@ -1,11 +1,57 @@
 #include "stiction/delassus.hpp"
 
+#include "stiction/compensated.hpp"
+#include "stiction/vector_kernels.hpp"
+
+#ifdef STICTION_X86_KERNELS
+#include <immintrin.h>
+#endif
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <vector>
 
 namespace stiction {
+
+namespace {
+
+#ifdef STICTION_X86_KERNELS
+// A symmetric sparse A's products as dot products of its compressed columns with x, four entries a
+// step (x gathered by index) in the lanes of one register: the scalar loops waited on their
+// additions' latency (SparseDelassus::multiply, multiplyWithAbs).
+__attribute__((target("avx2,fma"))) double laneSum(__m256d v) {
+  const __m128d half = _mm_add_pd(_mm256_castpd256_pd128(v), _mm256_extractf128_pd(v, 1));
+  return _mm_cvtsd_f64(_mm_add_sd(half, _mm_unpackhi_pd(half, half)));
+}
+
+__attribute__((target("avx2,fma"))) void gatherProductAvx2(Eigen::Index n, const int* outer, const int* inner,
+                                                           const double* value, const double* x, double* y,
+                                                           double* y_abs) {
+  const __m256d sign = _mm256_set1_pd(-0.0);
+  for (Eigen::Index j = 0; j < n; ++j) {
+    int p = outer[j];
+    const int end = outer[j + 1];
+    __m256d s = _mm256_setzero_pd(), a = _mm256_setzero_pd();
+    for (; p + 4 <= end; p += 4) {
+      const __m256d v = _mm256_loadu_pd(value + p);
+      const __m256d xi = _mm256_i32gather_pd(x, _mm_loadu_si128(reinterpret_cast<const __m128i*>(inner + p)), 8);
+      s = _mm256_fmadd_pd(v, xi, s);
+      if (y_abs != nullptr) a = _mm256_fmadd_pd(_mm256_andnot_pd(sign, v), _mm256_andnot_pd(sign, xi), a);
+    }
+    double sum = laneSum(s), abs_sum = y_abs != nullptr ? laneSum(a) : 0.0;
+    for (; p < end; ++p) {
+      const double xi = x[inner[p]];
+      sum += value[p] * xi;
+      abs_sum += std::abs(value[p]) * std::abs(xi);
+    }
+    y[j] = sum;
+    if (y_abs != nullptr) y_abs[j] = abs_sum;
+  }
+}
+#endif
+
+}  // namespace
 
 DenseDelassus::DenseDelassus(Eigen::MatrixXd A) : A_(std::move(A)) {
   if (A_.rows() != A_.cols())
@@ -92,6 +138,13 @@ void DenseDelassus::multiplyExtended(const Eigen::Matrix<long double, Eigen::Dyn
   for (Eigen::Index j = 0; j < A_.cols(); ++j) y += A_.col(j).cast<long double>() * x[j];
 }
 
+void DenseDelassus::compensatedResidual(const Eigen::Ref<const Eigen::VectorXd>& x,
+                                        const Eigen::Ref<const Eigen::VectorXd>& b, Eigen::Ref<Eigen::VectorXd> y) const {
+  thread_local Eigen::VectorXd lo;  // the rows' error sums
+  lo.resize(A_.rows());
+  compensatedDenseResidual(A_.data(), A_.rows(), x.data(), b.data(), y.data(), lo.data());
+}
+
 SparseDelassus::SparseDelassus(Matrix A, bool symmetric) : A_(std::move(A)), symmetric_(symmetric) {
   if (A_.rows() != A_.cols())
     throw std::invalid_argument("Delassus matrix A must be square, got " + std::to_string(A_.rows()) + "x" +
@@ -119,6 +172,11 @@ void SparseDelassus::multiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen:
     y.noalias() = A_ * x;
     return;
   }
+#ifdef STICTION_X86_KERNELS
+  if (vectorKernels())
+    return gatherProductAvx2(A_.cols(), A_.outerIndexPtr(), A_.innerIndexPtr(), A_.valuePtr(), x.data(), y.data(),
+                             nullptr);
+#endif
   const int* outer = A_.outerIndexPtr();
   const int* inner = A_.innerIndexPtr();
   const double* value = A_.valuePtr();
@@ -166,6 +224,11 @@ void SparseDelassus::multiplyWithAbs(const Eigen::Ref<const Eigen::VectorXd>& x,
     DelassusOperator::multiplyWithAbs(x, y, y_abs);
     return;
   }
+#ifdef STICTION_X86_KERNELS
+  if (vectorKernels())
+    return gatherProductAvx2(A_.cols(), A_.outerIndexPtr(), A_.innerIndexPtr(), A_.valuePtr(), x.data(), y.data(),
+                             y_abs.data());
+#endif
   const int* outer = A_.outerIndexPtr();
   const int* inner = A_.innerIndexPtr();
   const double* value = A_.valuePtr();
@@ -278,6 +341,19 @@ void SparseDelassus::multiplyExtended(const Eigen::Matrix<long double, Eigen::Dy
   for (Eigen::Index j = 0; j < A_.cols(); ++j)
     for (Matrix::InnerIterator it(A_, j); it; ++it)
       y[it.row()] += static_cast<long double>(it.value()) * x[j];
+}
+
+void SparseDelassus::compensatedResidual(const Eigen::Ref<const Eigen::VectorXd>& x,
+                                         const Eigen::Ref<const Eigen::VectorXd>& b, Eigen::Ref<Eigen::VectorXd> y) const {
+  if (symmetric_) {  // as multiply: A^T x, a gather
+    compensatedGatherResidual(A_.cols(), A_.outerIndexPtr(), A_.innerIndexPtr(), A_.valuePtr(), x.data(), b.data(),
+                              y.data());
+    return;
+  }
+  thread_local Eigen::VectorXd lo;
+  lo.resize(A_.rows());
+  compensatedScatterResidual(A_.cols(), A_.outerIndexPtr(), A_.innerIndexPtr(), A_.valuePtr(), x.data(), b.data(),
+                             y.data(), lo.data());
 }
 
 double SparseDelassus::rowNorm(Eigen::Index i) const {

@@ -64,6 +64,20 @@ void nonLinearEffectsFromKinematics(const pinocchio::Model& model, pinocchio::Da
   }
 }
 
+// The same for one free flyer, whose motion subspace is the identity in its own frame: nle is
+// the force of rnea's backward pass in that frame, Y a_gf + v x* (Y v) (freeBodyKinematics fills
+// no joint Jacobian to rotate it with).
+void freeBodyNonLinearEffects(const pinocchio::Model& model, const pinocchio::Data& data, Eigen::VectorXd& nle) {
+  const pinocchio::SE3& oMi = data.oMi[1];
+  const pinocchio::Motion a_gf(data.a[1].linear() - oMi.rotation().transpose() * model.gravity.linear(),
+                               data.a[1].angular());
+  const pinocchio::Inertia& Y = model.inertias[1];
+  const pinocchio::Force f = Y * a_gf + data.v[1].cross(Y * data.v[1]);
+  nle.resize(6);
+  nle.head<3>() = f.linear();
+  nle.tail<3>() = f.angular();
+}
+
 // M of one part (crba; h kd + h^2 kp on its diagonal for an implicit PD over h > 0) and its
 // factor M = U D U^T, in w.data. Throws when M is not positive definite.
 void factorMass(const SystemModel& part, SystemWork& w, const JointControl& control, double implicit_pd_step) {
@@ -123,7 +137,10 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
     const bool reuse = part.free_body && w.mass_factored && !pd_on_diagonal;
     w.mass_factored = part.free_body && !pd_on_diagonal;
     if (!reuse) factorMass(part, w, sd.control, implicit_pd_step);
-    nonLinearEffectsFromKinematics(model, w.data, w.forces, w.nle);
+    if (part.free_body)
+      freeBodyNonLinearEffects(model, w.data, w.nle);
+    else
+      nonLinearEffectsFromKinematics(model, w.data, w.forces, w.nle);
     gatherV(part, sd.tau, w.tau);
     w.v_free = w.tau - w.nle;
     pinocchio::cholesky::solve(model, w.data, w.v_free);  // M^-1 (tau - nle): the free acceleration

@@ -34,6 +34,9 @@ namespace stages {
 /// leaves are J' v) and the world-frame joint Jacobians, per part (sd.parts[s].data).
 void forwardKinematics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                        const Eigen::VectorXd& v);
+/// Stage 1 for a free body (SystemModel::free_body) from w.q, w.v: oMi, v and a of its joint, as
+/// Pinocchio's forward kinematics would leave them; no joint Jacobian (data.J is not filled).
+void freeBodyKinematics(const pinocchio::Model& model, SystemWork& w);
 
 /// 2. Detection from the placements of stage 1: half-spaces in world coordinates (plane_*),
 /// every candidate's signed distance (gaps; coal pairs fill their slots), and the active

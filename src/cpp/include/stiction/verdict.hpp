@@ -10,9 +10,11 @@
 // Evaluated the usual way, a sticking block with lambda = 1e12 and w = 1e-4
 // gives r = 0: w is below lambda's rounding step.
 //
-// The verdict evaluates it at the returned (double) lambda, in double first and, when
-// that is not decisive, in extended precision (long double: a 64-bit mantissa on
-// x86-64), and bounds the evaluation's rounding error: the product u = A lambda - b is off by at most
+// The verdict evaluates it at the returned (double) lambda, in double first; when that
+// is not decisive, in double again from a compensated u (compensated.hpp: off by
+// eps |u| + gamma^2 (|A||lambda| + |b|)); then in extended precision (long double: a
+// 64-bit mantissa on x86-64). Each stage bounds its rounding error: in the first,
+// the product u = A lambda - b is off by at most
 // gamma (|A||lambda| + |b|) per row (gamma = (k + 2) eps, the worst case of
 // a k-term dot product, k = DelassusOperator::maxRowEntries(): m dense, the
 // fullest row sparse), which carries over to w and r; a block whose
@@ -73,7 +75,7 @@ double stoppingScale(const ContactProblem& problem);
 
 /// The verdict's measures at a lambda (see above); all unnormalised.
 struct VerdictMeasures {
-  double natural_map = 0.0;  ///< evaluated in extended precision at the double lambda
+  double natural_map = 0.0;  ///< at the double lambda, by the stage that decided
   double bound = 0.0;        ///< bound on |natural_map - the exact natural map|
   double floor = 0.0;        ///< how far rounding lambda to double alone can move the natural map
   std::vector<double> block_floor;  ///< per block (names the culprits of an unresolvable result)
@@ -81,7 +83,8 @@ struct VerdictMeasures {
 
 /// Evaluates them at lambda: first in double (u recomputed), whose worst-case bound is
 /// decisive when it keeps natural_map on one side of `decisive` (the threshold the
-/// caller tests: a well-scaled problem stops there), else in extended precision. block_floor only with
+/// caller tests: a well-scaled problem stops there), else from a compensated u, else in
+/// extended precision. block_floor only with
 /// per_block. No allocation once the (thread-local) workspace has the problem's size.
 /// fresh_u: u = A lambda - b as DelassusOperator::multiply and a subtraction of b computed it (the
 /// double stage then takes it rather than a product of its own; an iterate's incrementally updated u
@@ -92,7 +95,8 @@ void measureVerdict(const ContactProblem& problem, const Eigen::Ref<const Eigen:
                     const Eigen::VectorXd* fresh_u = nullptr, const Eigen::VectorXd* fresh_abs = nullptr);
 
 /// u = A lambda - b for the lambda of the last verdict measured in this solve (the double
-/// stage's, bit for bit what a product would give): true and `u` written when lambda is that one.
+/// stage's product, or the compensated one when that stage ran): true and `u` written when lambda
+/// is that one.
 bool lastVerdictResidual(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
                          Eigen::VectorXd& u);
 
