@@ -19,7 +19,9 @@ namespace {
 #ifdef STICTION_X86_KERNELS
 // A symmetric sparse A's products as dot products of its compressed columns with x, four entries a
 // step (x gathered by index) in the lanes of one register: the scalar loops waited on their
-// additions' latency (SparseDelassus::multiply, multiplyWithAbs).
+// additions' latency (SparseDelassus::multiply, absMultiply, multiplyWithAbs; y or y_abs may be
+// null). A row's sum goes through at most ceil(k / 4) fused multiply-adds in its lane, two lane
+// sums and at most three tail terms of two roundings each (productRoundingTerms).
 __attribute__((target("avx2,fma"))) double laneSum(__m256d v) {
   const __m128d half = _mm_add_pd(_mm256_castpd256_pd128(v), _mm256_extractf128_pd(v, 1));
   return _mm_cvtsd_f64(_mm_add_sd(half, _mm_unpackhi_pd(half, half)));
@@ -36,16 +38,16 @@ __attribute__((target("avx2,fma"))) void gatherProductAvx2(Eigen::Index n, const
     for (; p + 4 <= end; p += 4) {
       const __m256d v = _mm256_loadu_pd(value + p);
       const __m256d xi = _mm256_i32gather_pd(x, _mm_loadu_si128(reinterpret_cast<const __m128i*>(inner + p)), 8);
-      s = _mm256_fmadd_pd(v, xi, s);
+      if (y != nullptr) s = _mm256_fmadd_pd(v, xi, s);
       if (y_abs != nullptr) a = _mm256_fmadd_pd(_mm256_andnot_pd(sign, v), _mm256_andnot_pd(sign, xi), a);
     }
-    double sum = laneSum(s), abs_sum = y_abs != nullptr ? laneSum(a) : 0.0;
+    double sum = laneSum(s), abs_sum = laneSum(a);
     for (; p < end; ++p) {
       const double xi = x[inner[p]];
       sum += value[p] * xi;
       abs_sum += std::abs(value[p]) * std::abs(xi);
     }
-    y[j] = sum;
+    if (y != nullptr) y[j] = sum;
     if (y_abs != nullptr) y_abs[j] = abs_sum;
   }
 }
@@ -201,6 +203,11 @@ void SparseDelassus::absMultiply(const Eigen::Ref<const Eigen::VectorXd>& x, Eig
     y.noalias() = abs_ * x.cwiseAbs();
     return;
   }
+#ifdef STICTION_X86_KERNELS
+  if (vectorKernels())
+    return gatherProductAvx2(A_.cols(), A_.outerIndexPtr(), A_.innerIndexPtr(), A_.valuePtr(), x.data(), nullptr,
+                             y.data());
+#endif
   const int* outer = A_.outerIndexPtr();
   const int* inner = A_.innerIndexPtr();
   const double* value = A_.valuePtr();
@@ -251,6 +258,14 @@ void SparseDelassus::multiplyWithAbs(const Eigen::Ref<const Eigen::VectorXd>& x,
     y[j] = s0 + s1;
     y_abs[j] = a0 + a1;
   }
+}
+
+Eigen::Index SparseDelassus::productRoundingTerms() const {
+#ifdef STICTION_X86_KERNELS
+  // the vector kernel's lanes (gatherProductAvx2): ceil(k / 4) + 2 + 6, with a margin of 2
+  if (symmetric_ && vectorKernels()) return std::min(max_row_entries_, (max_row_entries_ + 3) / 4 + 10);
+#endif
+  return max_row_entries_;
 }
 
 void SparseDelassus::addColumnBlockTimes(Eigen::Index offset, Eigen::Index size,

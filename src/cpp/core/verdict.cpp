@@ -175,10 +175,12 @@ void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<cons
     abs_product.resize(m);
     problem.delassus().absMultiply(lam, abs_product);
   }
-  // A row of A lambda sums at most `terms` products (a sparse A: its fullest row, not m): the
-  // worst-case rounding bound gamma_terms of every product below.
+  // A row of A lambda sums at most `terms` products (a sparse A: its fullest row, not m), through a
+  // chain of at most `chain` roundings in the operator's own products (fewer where its kernel sums
+  // in lanes): the worst-case rounding bounds gamma_chain of stage 1, gamma_terms of stages 2-3.
   const double terms = static_cast<double>(problem.delassus().maxRowEntries());
-  abs_product *= 1.0 + (terms + 2.0) * kEps;
+  const double chain = static_cast<double>(problem.delassus().productRoundingTerms());
+  abs_product *= 1.0 + (chain + 2.0) * kEps;
   out.floor = floorOf(problem, lam, abs_product, per_block ? out.block_floor : block_floor);
   auto finish = [&](double map, double unit) {
     out.natural_map = map;
@@ -188,7 +190,7 @@ void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<cons
   };
   // 1. In double (vectorised; enough for a well-scaled problem): decisive when even
   //    its worst-case bound keeps it on one side of `decisive`.
-  double gamma = (terms + 2.0) * kEps;
+  double gamma = (chain + 2.0) * kEps;
   if (fresh_u != nullptr) {
     ud = *fresh_u;
   } else {

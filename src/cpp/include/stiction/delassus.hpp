@@ -78,6 +78,10 @@ class DelassusOperator {
   /// The most entries any row of A x sums: the k of the rounding bound gamma_k = k eps of a
   /// product (verdict.hpp; a dense A: its columns; a sparse one: its fullest row).
   virtual Eigen::Index maxRowEntries() const { return rows(); }
+  /// The k of the rounding bound gamma_k (|A||x|) of this operator's double products (multiply,
+  /// absMultiply, multiplyWithAbs): the longest chain of roundings a row's sum goes through. At
+  /// most maxRowEntries(); fewer where the terms are summed in independent lanes.
+  virtual Eigen::Index productRoundingTerms() const { return maxRowEntries(); }
 };
 
 /// Dense, column-major storage.
@@ -152,6 +156,7 @@ class SparseDelassus final : public DelassusOperator {
   bool allFinite() const override;
   const Matrix* sparse() const override { return &A_; }
   Eigen::Index maxRowEntries() const override { return max_row_entries_; }
+  Eigen::Index productRoundingTerms() const override;
   Eigen::Index nonZeros() const { return A_.nonZeros(); }
   /// Take the values of `A` when it has this operator's pattern (the simulator's A from one step
   /// to the next while the same contacts are active): O(entries), no allocation. Returns false and

@@ -16,8 +16,9 @@
 // 64-bit mantissa on x86-64). Each stage bounds its rounding error: in the first,
 // the product u = A lambda - b is off by at most
 // gamma (|A||lambda| + |b|) per row (gamma = (k + 2) eps, the worst case of
-// a k-term dot product, k = DelassusOperator::maxRowEntries(): m dense, the
-// fullest row sparse), which carries over to w and r; a block whose
+// a dot product whose sum goes through k roundings, k =
+// DelassusOperator::productRoundingTerms(): m dense, the fullest row sparse, a
+// quarter of it where a vector kernel sums in four lanes), which carries over to w and r; a block whose
 // lambda - w is within that error of a region boundary, or slips, adds
 // eps (|lambda_i| + |lambda_i - w_i|) for the subtraction. Then
 //
