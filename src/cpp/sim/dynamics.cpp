@@ -90,6 +90,15 @@ void freeBodyMassSolve(const pinocchio::Data& data, double* x) {
     for (int j = i + 1; j < 6; ++j) x[j] -= U(i, j) * x[i];
 }
 
+// A free body's S = D^-1/2 U^-1 from its factor M = U D U^T (W = S J^T, delassusFactors).
+void freeBodyScaling(SystemWork& w) {
+  const Eigen::Matrix<double, 6, 6> U = w.data.U;
+  const Eigen::Matrix<double, 6, 6> U_inverse =
+      U.triangularView<Eigen::UnitUpper>().solve(Eigen::Matrix<double, 6, 6>::Identity());
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) w.free_body_scaling[6 * i + j] = j >= i ? std::sqrt(w.data.Dinv[i]) * U_inverse(i, j) : 0.0;
+}
+
 // x = M^-1 x for one part.
 void partMassSolve(const SystemModel& part, pinocchio::Data& data, Eigen::VectorXd& x) {
   if (part.free_body)
@@ -156,7 +165,11 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
       for (int world : part.v_index) pd_on_diagonal = pd_on_diagonal || sd.control.kd[world] != 0.0 || sd.control.kp[world] != 0.0;
     const bool reuse = part.free_body && w.mass_factored && !pd_on_diagonal;
     w.mass_factored = part.free_body && !pd_on_diagonal;
-    if (!reuse) factorMass(part, w, sd.control, implicit_pd_step);
+    if (!reuse) {
+      factorMass(part, w, sd.control, implicit_pd_step);
+      w.has_free_body_scaling = part.free_body;
+      if (part.free_body) freeBodyScaling(w);
+    }
     if (part.free_body)
       freeBodyNonLinearEffects(model, w.data, w.nle);
     else
@@ -221,6 +234,27 @@ Eigen::Index delassusFactors(SimulatorData& sd) {
       // (W has more rows than 6: partOperator's rank update, as for any robot)
       continue;
     }
+    if (w.has_free_body_scaling && w.J.cols() == 6) {
+      // A free body: W = S J^T column by column from its constant S (upper triangular), W^T for the
+      // vector kernel in the same pass. With a diagonal mass matrix (a box), S's zeros keep each
+      // value exactly sqrt(D_k^-1) J_ck, as the row operations and scaling gave.
+      const bool transposed = vectorKernels();
+      w.W.resize(6, n);
+      if (transposed) w.Wt.resize(static_cast<std::size_t>(6 * n + 4));
+      const double* J = w.J.data();  // column-major n x 6
+      const Eigen::Map<const Eigen::Matrix<double, 6, 6, Eigen::RowMajor>> S(w.free_body_scaling.data());
+      double* Wt = transposed ? w.Wt.data() : nullptr;
+      for (Eigen::Index c = 0; c < n; ++c) {
+        Eigen::Matrix<double, 6, 1> jc;
+        for (int l = 0; l < 6; ++l) jc[l] = J[c + l * n];
+        const Eigen::Matrix<double, 6, 1> wc = S * jc;
+        w.W.col(c) = wc;
+        if (Wt != nullptr)
+          for (int k = 0; k < 6; ++k) Wt[k * n + c] = wc[k];
+      }
+      if (transposed) std::fill(w.Wt.end() - 4, w.Wt.end(), 0.0);
+      continue;
+    }
     w.W = w.J.transpose();
     if (w.W.rows() <= 6) {
       // a free body's 6 x 6 factor: back substitution by rows (Eigen's blocked triangular
@@ -252,9 +286,13 @@ Eigen::Index delassusFactors(SimulatorData& sd) {
 // "No -march=native"). Column c of a block is sum_k W_i[k, :] W_j[k, c] (row k of W_i, three
 // values of W^T's column k, one fused multiply-add per k); its mirror's row r the same products
 // in the same order, so A stays exactly symmetric.
-__attribute__((target("avx2,fma"))) void freeBodyBlocksAvx2(const AssemblyBlock* blocks, std::size_t count,
+__attribute__((target("avx2,fma"))) bool freeBodyBlocksAvx2(const AssemblyBlock* blocks, std::size_t count,
                                                             const double* const* wt, const int* stride,
                                                             double* value) {
+  // x * 0 is 0 for finite x, NaN for inf and NaN: their sum tells whether every value written is
+  // finite (solveContacts then need not read A again to check). Lane 3 is not a value: masked.
+  const __m256d zero_lane3 = _mm256_castsi256_pd(_mm256_set_epi64x(0, -1, -1, -1));
+  __m256d finite = _mm256_setzero_pd();
   // three lanes: two and one (a masked store is microcoded on some processors: it was most of this loop)
   const auto store3 = [](double* to, __m256d v) __attribute__((target("avx2,fma"))) {
     _mm_storeu_pd(to, _mm256_castpd256_pd128(v));
@@ -290,7 +328,13 @@ __attribute__((target("avx2,fma"))) void freeBodyBlocksAvx2(const AssemblyBlock*
       store3(value + e.mirror[1], row1);
       store3(value + e.mirror[2], row2);
     }
+    // (a mirror's values are the block's, transposed: the block alone decides)
+    const __m256d block = _mm256_add_pd(_mm256_add_pd(col0, col1), col2);
+    finite = _mm256_add_pd(finite, _mm256_and_pd(_mm256_mul_pd(block, _mm256_setzero_pd()), zero_lane3));
   }
+  alignas(32) double lanes[4];
+  _mm256_store_pd(lanes, finite);
+  return !std::isnan((lanes[0] + lanes[1]) + (lanes[2] + lanes[3]));
 }
 
 #endif
@@ -299,10 +343,13 @@ __attribute__((target("avx2,fma"))) void freeBodyBlocksAvx2(const AssemblyBlock*
 // was last assembled): each block of the lower triangle (a pair of contacts, or anchors) is the
 // product of its two blocks' columns of W in the one or two parts both belong to, written with its
 // mirror, three values at a time. (The parts' dense shares summed into place entry by entry cost
-// twice that: a quarter of a 256-contact tower's step went to the scattered sums.)
-void assembleFromPlan(SimulatorData& sd, double* value) {
+// twice that: a quarter of a 256-contact tower's step went to the scattered sums.) True when the
+// vector kernel wrote every value and found them all finite (solveContacts' check, 2 % of a
+// 1024-contact tower's step, is then done).
+bool assembleFromPlan(SimulatorData& sd, double* value) {
   sd.part_w.resize(sd.parts.size());
   for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.part_w[s] = sd.parts[s].W.data();
+  bool known_finite = false;
 #ifdef STICTION_X86_KERNELS
   const bool vector = vectorKernels();
   if (vector) {
@@ -312,7 +359,8 @@ void assembleFromPlan(SimulatorData& sd, double* value) {
       sd.part_wt[s] = sd.parts[s].Wt.data();
       sd.part_stride[s] = static_cast<int>(sd.parts[s].rows.size());
     }
-    freeBodyBlocksAvx2(sd.assembly.data(), sd.assembly.size(), sd.part_wt.data(), sd.part_stride.data(), value);
+    known_finite =
+        freeBodyBlocksAvx2(sd.assembly.data(), sd.assembly.size(), sd.part_wt.data(), sd.part_stride.data(), value);
   }
 #else
   const bool vector = false;
@@ -324,6 +372,7 @@ void assembleFromPlan(SimulatorData& sd, double* value) {
   for (const AssemblyBlock& e : sd.assembly) {
     const int ki = e.rows, kj = e.cols;
     if (e.free_bodies && vector) continue;  // done above
+    known_finite = false;  // (checked by solveContacts)
     if (e.free_bodies) {  // free bodies' spatial contacts: W has 6 rows, blocks are 3 x 3
       const double* wi = sd.part_w[static_cast<std::size_t>(e.part[0])] + 6 * e.row[0];
       const double* wj = sd.part_w[static_cast<std::size_t>(e.part[0])] + 6 * e.col[0];
@@ -351,6 +400,7 @@ void assembleFromPlan(SimulatorData& sd, double* value) {
       for (int r = 0; r < ki; ++r)
         for (int c = 0; c < kj; ++c) value[e.mirror[r] + c] = block[r + 3 * c];
   }
+  return known_finite;
 }
 
 // The plan of assembleFromPlan for A_sparse's pattern just built (dense: for sd.A, stored by
@@ -436,6 +486,7 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
   // block-tridiagonal A is 14-20 %).
   sd.sparse = sd.parts.size() > 1 && rows > kSparseDelassusRows && entries * 4 <= rows * rows;
   sd.a_in_operator = false;  // A_sparse holds this step's A again
+  sd.a_known_finite = false;
   if (sd.sparse && sd.parts_share_rows) {  // rows shared by two parts (contacts between bodies)
     // While the entries' (row, column) sequence is last step's (the same contacts on the same
     // rows), A's pattern and the plan of its entries hold: the values are computed in place
@@ -444,7 +495,7 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     bool same = sd.assembly_kind == AssemblyKind::kSparse && sd.A_sparse.rows() == rows &&
                 sd.triplet_position.size() == count && sd.triplets.size() == count && samePartRows(sd);
     if (same) {
-      assembleFromPlan(sd, sd.A_sparse.valuePtr());
+      sd.a_known_finite = assembleFromPlan(sd, sd.A_sparse.valuePtr());
       sd.A.resize(0, 0);
       return;
     }

@@ -77,7 +77,8 @@ std::array<int, 2> blockParts(const SimulatorModel& sim, const BlockBodies& b) {
 
 // Jrel += sign [R, -[R r]x R]: the world velocity of the material point r (joint frame) of a free
 // flyer whose velocity is (v, omega) in its own frame.
-void addFreeBodyPointJacobian(const Eigen::Matrix3d& R, const Eigen::Vector3d& r, double sign, Eigen::Matrix3Xd& Jrel) {
+void addFreeBodyPointJacobian(const Eigen::Matrix3d& R, const Eigen::Vector3d& r, double sign,
+                              Eigen::Matrix<double, 3, 6>& Jrel) {
   const Eigen::Vector3d rw = R * r;
   Eigen::Matrix3d skew;
   skew << 0.0, -rw.z(), rw.y(), rw.z(), 0.0, -rw.x(), -rw.y(), rw.x(), 0.0;
@@ -106,15 +107,23 @@ void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& 
     if (s < 0) continue;
     const pinocchio::Model& m = sim.systems[s].model;
     SystemWork& w = sd.parts[s];
-    w.Jrel.setZero();
     if (sim.systems[s].free_body) {
       // One free flyer (v = (v, omega) in its own frame): a material point r (joint frame) moves at
       // R (v + omega x r) = R v - [R r]x R omega. (Pinocchio's frame Jacobian, 6 x 6 from the joint
-      // Jacobian, was half of a tower's kinematics.)
+      // Jacobian, was half of a tower's kinematics.) Fixed sizes: the rows T Jrel in one product.
       const Eigen::Matrix3d& R = w.data.oMi[1].rotation();
-      if (partOf(sim, b.plus) == s) addFreeBodyPointJacobian(R, at_plus.translation(), 1.0, w.Jrel);
-      if (partOf(sim, b.minus) == s) addFreeBodyPointJacobian(R, at_minus.translation(), -1.0, w.Jrel);
-    } else {
+      Eigen::Matrix<double, 3, 6> Jrel = Eigen::Matrix<double, 3, 6>::Zero();
+      if (partOf(sim, b.plus) == s) addFreeBodyPointJacobian(R, at_plus.translation(), 1.0, Jrel);
+      if (partOf(sim, b.minus) == s) addFreeBodyPointJacobian(R, at_minus.translation(), -1.0, Jrel);
+      const Eigen::Matrix<double, 3, 6> rows = T * Jrel;
+      const int lr = sd.part_fill[s];
+      sd.part_fill[s] += k;
+      for (int r = 0; r < k; ++r) w.J.row(lr + r) = rows.row(r);
+      local_rows[p] = lr;
+      continue;
+    }
+    w.Jrel.setZero();
+    {
       if (partOf(sim, b.plus) == s) {
         w.J6.setZero();
         pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.plus], at_plus, pinocchio::LOCAL_WORLD_ALIGNED, w.J6);
@@ -258,7 +267,11 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
     const pinocchio::SE3 at_center(Eigen::Matrix3d::Identity(), center_j);
     const Eigen::Vector3d acc_plane = pointAcceleration(sim, sd, bodies.minus, plane_at_point);
     const Eigen::Vector3d acc_point = pointAcceleration(sim, sd, bodies.plus, at_point) - acc_plane;
-    const Eigen::Vector3d acc_center = pointAcceleration(sim, sd, bodies.plus, at_center) - acc_plane;
+    // (a point contact, radius 0: the centre is the point, up to the rounding of the round trip
+    // through world coordinates; its acceleration is then computed once)
+    const Eigen::Vector3d acc_center = c.radius == 0.0 && at_point.translation() == center_j
+                                           ? acc_point
+                                           : pointAcceleration(sim, sd, bodies.plus, at_center) - acc_plane;
     r = 0;
     if (k >= 2) {
       sd.drift[row + r] = t1.dot(acc_point);

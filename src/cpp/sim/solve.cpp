@@ -72,7 +72,7 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   const auto all_finite = [](const double* x, Eigen::Index n) {
     return !std::isnan((Eigen::Map<const Eigen::ArrayXd>(x, n) * 0.0).sum());
   };
-  const bool finite_A = sd.sparse ? all_finite(sd.A_sparse.valuePtr(), sd.A_sparse.nonZeros())
+  const bool finite_A = sd.sparse ? sd.a_known_finite || all_finite(sd.A_sparse.valuePtr(), sd.A_sparse.nonZeros())
                                   : all_finite(sd.A.data(), sd.A.size());
   if (!finite_A || !sd.b.allFinite())
     throw std::runtime_error("simulation diverged: non-finite Delassus operator or right-hand side at t = " +

@@ -59,6 +59,7 @@ class BlockCholesky3 {
   std::vector<Eigen::Matrix3d> pivot_inverse_;  // L_kk^-1 (lower triangular)
   std::vector<Eigen::Matrix3d> work_;           // the factorization's column workspace
   mutable Eigen::VectorXd y_;
+  mutable std::vector<double> y4_;  // y in four slots per block (the vector kernel's layout)
 };
 
 }  // namespace stiction

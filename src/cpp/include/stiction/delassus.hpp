@@ -177,6 +177,8 @@ class SparseDelassus final : public DelassusOperator {
   void updateDiagonal();
   void valuesChanged();  // |A| (non-symmetric A) and the diagonal, after new values
   Eigen::Index max_row_entries_ = 0;  // the pattern's fullest row
+  bool runs_of_three_ = false;  // every column's entries in runs of 3 consecutive rows (spatial contacts)
+  void productKernel(const double* x, double* y, double* y_abs) const;  // the AVX2 products (y or y_abs null)
   bool symmetric_ = false;
   mutable std::once_flag dense_once_;
   mutable std::atomic<bool> dense_built_{false};

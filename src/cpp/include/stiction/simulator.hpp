@@ -17,6 +17,8 @@
 // allocates only when the number of active contacts changes).
 #pragma once
 
+#include <array>
+
 #include <memory>
 #include <string>
 #include <vector>
@@ -214,6 +216,9 @@ struct SystemWork {
   Eigen::Matrix3Xd Jrel;  ///< 3 x nv: one contact's relative point Jacobian
   std::vector<pinocchio::Force> forces;
   bool mass_factored = false;  ///< free body: data.M, U, D hold its constant mass matrix and factor
+  /// A free body's D^-1/2 U^-1 (row-major, upper triangular), set with its factor: its W = S J^T.
+  std::array<double, 36> free_body_scaling{};
+  bool has_free_body_scaling = false;
 };
 
 class SimulatorData {
@@ -292,6 +297,7 @@ class SimulatorData {
   long pattern_version = 0;             ///< counts the sparse A's pattern builds (the plan keeps it)
   long operator_pattern_version = -1;   ///< the pattern sparse_delassus was built with
   bool a_in_operator = false;           ///< this step's A_sparse values were swapped into sparse_delassus
+  bool a_known_finite = false;          ///< the assembly found every value of this step's A_sparse finite
   std::vector<const double*> part_w, part_wt;  ///< each part's W, W^T (assembleFromPlan's workspace)
   std::vector<int> part_stride;                ///< each part's rows (W^T's column length)
   bool parts_share_rows = false;  ///< a contact between two parts: its rows in both
