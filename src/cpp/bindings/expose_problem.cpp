@@ -73,6 +73,22 @@ Eigen::VectorXd compensatedResidualOf(const bp::object& A, const bp::object& x, 
   return y;
 }
 
+// For the tests: the operator's double products (multiply, absMultiply, multiplyWithAbs's two),
+// to compare the vector kernels' with the portable loops' (the same operators as above).
+bp::tuple operatorProductsOf(const bp::object& A, const bp::object& x, bool symmetric) {
+  std::shared_ptr<DelassusOperator> op;
+  if (PyObject_HasAttrString(A.ptr(), "tocsc") && PyObject_HasAttrString(A.ptr(), "nnz"))
+    op = std::make_shared<SparseDelassus>(toSparse(A), symmetric);
+  else
+    op = std::make_shared<DenseDelassus>(toMatrix(A, "_operator_products: A"));
+  const Eigen::VectorXd xv = toVector(x, "_operator_products: x", op->rows());
+  Eigen::VectorXd y(op->rows()), y_abs(op->rows()), both(op->rows()), both_abs(op->rows());
+  op->multiply(xv, y);
+  op->absMultiply(xv, y_abs);
+  op->multiplyWithAbs(xv, both, both_abs);
+  return bp::make_tuple(y, y_abs, both, both_abs, static_cast<long>(op->productRoundingTerms()));
+}
+
 Constraint bilateral(const bp::object& rows) {
   return Constraint::bilateral(fromPython<int>(rows, "Constraint.bilateral: rows"));
 }
@@ -166,6 +182,8 @@ void exposeProblem() {
   bp::def("_compensated_residual", &compensatedResidualOf,
           (bp::arg("A"), bp::arg("x"), bp::arg("b"), bp::arg("symmetric") = false),
           "(for tests) A x - b as the verdict's compensated stage computes it");
+  bp::def("_operator_products", &operatorProductsOf, (bp::arg("A"), bp::arg("x"), bp::arg("symmetric") = false),
+          "(for tests) (A x, |A||x|, A x and |A||x| from one pass, the rounding chain length) by the operator");
 }
 
 }  // namespace python
