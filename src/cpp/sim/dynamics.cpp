@@ -95,8 +95,12 @@ void freeBodyScaling(SystemWork& w) {
   const Eigen::Matrix<double, 6, 6> U = w.data.U;
   const Eigen::Matrix<double, 6, 6> U_inverse =
       U.triangularView<Eigen::UnitUpper>().solve(Eigen::Matrix<double, 6, 6>::Identity());
+  w.free_body_scaling_diagonal = true;
   for (int i = 0; i < 6; ++i)
-    for (int j = 0; j < 6; ++j) w.free_body_scaling[6 * i + j] = j >= i ? std::sqrt(w.data.Dinv[i]) * U_inverse(i, j) : 0.0;
+    for (int j = 0; j < 6; ++j) {
+      w.free_body_scaling[6 * i + j] = j >= i ? std::sqrt(w.data.Dinv[i]) * U_inverse(i, j) : 0.0;
+      if (j != i && w.free_body_scaling[6 * i + j] != 0.0) w.free_body_scaling_diagonal = false;
+    }
 }
 
 // x = M^-1 x for one part.
@@ -244,6 +248,19 @@ Eigen::Index delassusFactors(SimulatorData& sd) {
       const double* J = w.J.data();  // column-major n x 6
       const Eigen::Map<const Eigen::Matrix<double, 6, 6, Eigen::RowMajor>> S(w.free_body_scaling.data());
       double* Wt = transposed ? w.Wt.data() : nullptr;
+      if (w.free_body_scaling_diagonal) {
+        // (a box, a sphere: its centre of mass at its origin) row k of W is column k of J scaled
+        double* W = w.W.data();
+        for (int k = 0; k < 6; ++k) {
+          const double scale = S(k, k);
+          const double* column = J + k * n;
+          for (Eigen::Index c = 0; c < n; ++c) W[6 * c + k] = scale * column[c];
+          if (Wt != nullptr)
+            for (Eigen::Index c = 0; c < n; ++c) Wt[k * n + c] = scale * column[c];
+        }
+        if (Wt != nullptr) std::fill(w.Wt.end() - 4, w.Wt.end(), 0.0);
+        continue;
+      }
       for (Eigen::Index c = 0; c < n; ++c) {
         Eigen::Matrix<double, 6, 1> jc;
         for (int l = 0; l < 6; ++l) jc[l] = J[c + l * n];

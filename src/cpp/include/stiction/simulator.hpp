@@ -219,6 +219,7 @@ struct SystemWork {
   /// A free body's D^-1/2 U^-1 (row-major, upper triangular), set with its factor: its W = S J^T.
   std::array<double, 36> free_body_scaling{};
   bool has_free_body_scaling = false;
+  bool free_body_scaling_diagonal = false;  ///< S is diagonal (a box: centre of mass at its origin)
 };
 
 class SimulatorData {
