@@ -75,9 +75,12 @@ std::array<int, 2> blockParts(const SimulatorModel& sim, const BlockBodies& b) {
   return {s1, s2 != s1 ? s2 : -1};
 }
 
+// A point of a joint's frame as the placement Pinocchio's frame functions take (axes the joint's).
+pinocchio::SE3 pointPlacement(const Eigen::Vector3d& point) { return pinocchio::SE3(Eigen::Matrix3d::Identity(), point); }
+
 // Jrel += sign [R, -[R r]x R]: the world velocity of the material point r (joint frame) of a free
 // flyer whose velocity is (v, omega) in its own frame.
-void addFreeBodyPointJacobian(const Eigen::Matrix3d& R, const Eigen::Vector3d& r, double sign,
+inline void addFreeBodyPointJacobian(const Eigen::Matrix3d& R, const Eigen::Vector3d& r, double sign,
                               Eigen::Matrix<double, 3, 6>& Jrel) {
   const Eigen::Vector3d rw = R * r;
   Eigen::Matrix3d skew;
@@ -96,10 +99,10 @@ void reserveRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies
 }
 
 // The block's next k rows in each part it touches: T (rows 0..k-1) times the relative point
-// Jacobian, the plus body's point `at_plus` (a placement in its joint's frame) minus the
-// minus body's `at_minus`. `local_rows` receives each part's first local row.
-void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& b, const pinocchio::SE3& at_plus,
-               const pinocchio::SE3& at_minus, const Eigen::Matrix3d& T, int k, std::array<int, 2>& local_rows) {
+// Jacobian, the plus body's point `at_plus` (in its joint's frame) minus the minus body's
+// `at_minus`. `local_rows` receives each part's first local row.
+void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& b, const Eigen::Vector3d& at_plus,
+               const Eigen::Vector3d& at_minus, const Eigen::Matrix3d& T, int k, std::array<int, 2>& local_rows) {
   const std::array<int, 2> parts = blockParts(sim, b);
   for (int p = 0; p < 2; ++p) {
     const int s = parts[p];
@@ -113,8 +116,8 @@ void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& 
       // Jacobian, was half of a tower's kinematics.) Fixed sizes: the rows T Jrel in one product.
       const Eigen::Matrix3d& R = w.data.oMi[1].rotation();
       Eigen::Matrix<double, 3, 6> Jrel = Eigen::Matrix<double, 3, 6>::Zero();
-      if (partOf(sim, b.plus) == s) addFreeBodyPointJacobian(R, at_plus.translation(), 1.0, Jrel);
-      if (partOf(sim, b.minus) == s) addFreeBodyPointJacobian(R, at_minus.translation(), -1.0, Jrel);
+      if (partOf(sim, b.plus) == s) addFreeBodyPointJacobian(R, at_plus, 1.0, Jrel);
+      if (partOf(sim, b.minus) == s) addFreeBodyPointJacobian(R, at_minus, -1.0, Jrel);
       const Eigen::Matrix<double, 3, 6> rows = T * Jrel;
       const int lr = sd.part_fill[s];
       sd.part_fill[s] += k;
@@ -126,13 +129,14 @@ void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& 
     {
       if (partOf(sim, b.plus) == s) {
         w.J6.setZero();
-        pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.plus], at_plus, pinocchio::LOCAL_WORLD_ALIGNED, w.J6);
+        pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.plus], pointPlacement(at_plus),
+                                    pinocchio::LOCAL_WORLD_ALIGNED, w.J6);
         w.Jrel += w.J6.topRows<3>();
       }
       if (partOf(sim, b.minus) == s) {
         w.J6.setZero();
-        pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.minus], at_minus, pinocchio::LOCAL_WORLD_ALIGNED,
-                                    w.J6);
+        pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.minus], pointPlacement(at_minus),
+                                    pinocchio::LOCAL_WORLD_ALIGNED, w.J6);
         w.Jrel -= w.J6.topRows<3>();
       }
     }
@@ -143,21 +147,21 @@ void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& 
   }
 }
 
-// The classical acceleration J' v of the point `at` (a placement in joint j's frame), in
-// world axes; 0 for the world.
+// The classical acceleration J' v of the point `at` (in joint j's frame), in world axes; 0 for
+// the world.
 Eigen::Vector3d pointAcceleration(const SimulatorModel& sim, SimulatorData& sd, pinocchio::JointIndex j,
-                                  const pinocchio::SE3& at) {
+                                  const Eigen::Vector3d& at) {
   if (j == 0) return Eigen::Vector3d::Zero();
   const int s = sim.joint_system[j];
   if (sim.systems[s].free_body) {
     // a free flyer at zero acceleration: R (omega x (v + omega x r)), its velocity in its own frame
     const pinocchio::Motion& vj = sd.parts[s].data.v[1];
-    const Eigen::Vector3d r = at.translation();
+    const Eigen::Vector3d& r = at;
     const Eigen::Vector3d v_point = vj.linear() + vj.angular().cross(r);
     return sd.parts[s].data.oMi[1].rotation() * vj.angular().cross(v_point);
   }
-  return pinocchio::getFrameClassicalAcceleration(sim.systems[s].model, sd.parts[s].data, sim.joint_local[j], at,
-                                                  pinocchio::LOCAL_WORLD_ALIGNED)
+  return pinocchio::getFrameClassicalAcceleration(sim.systems[s].model, sd.parts[s].data, sim.joint_local[j],
+                                                  pointPlacement(at), pinocchio::LOCAL_WORLD_ALIGNED)
       .linear();
 }
 
@@ -218,8 +222,8 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
     if (sim.slot_pair[i] >= 0) {
       // coal contact: relative velocity of geometry 2's material point w.r.t. geometry 1's
       const Eigen::Vector3d p = sd.slot_point.col(i), n = sd.slot_normal.col(i);
-      const pinocchio::SE3 at_plus(Eigen::Matrix3d::Identity(), jointPlacement(sim, sd, bodies.plus).actInv(p));
-      const pinocchio::SE3 at_minus(Eigen::Matrix3d::Identity(), jointPlacement(sim, sd, bodies.minus).actInv(p));
+      const Eigen::Vector3d at_plus = jointPlacement(sim, sd, bodies.plus).actInv(p);
+      const Eigen::Vector3d at_minus = jointPlacement(sim, sd, bodies.minus).actInv(p);
       if (k == 3) {  // else frictionless (or mu = 0): the normal row only
         T.row(0) = sd.slot_t1.col(i).transpose();
         T.row(1) = sd.slot_t2.col(i).transpose();
@@ -251,12 +255,11 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
     const pinocchio::SE3& oMj = jointPlacement(sim, sd, bodies.plus);
     const Eigen::Vector3d center_j = f.placement.act(c.offset);
     const Eigen::Vector3d point_w = oMj.act(center_j) - c.radius * n;
-    const pinocchio::SE3 at_point(Eigen::Matrix3d::Identity(), oMj.actInv(point_w));
+    const Eigen::Vector3d at_point = oMj.actInv(point_w);
     // A body's face (minus != 0): velocities relative to the face's material point at the
     // contact. (The face's rotation adds terms of order |omega| |v_rel| to the drift that
     // are left out; the position term corrects what they would.)
-    const pinocchio::SE3 plane_at_point(Eigen::Matrix3d::Identity(),
-                                        jointPlacement(sim, sd, bodies.minus).actInv(point_w));
+    const Eigen::Vector3d plane_at_point = jointPlacement(sim, sd, bodies.minus).actInv(point_w);
     int r = 0;
     if (k >= 2) T.row(r++) = t1.transpose();  // planar and spatial: t1 (planar scenes: the in-plane tangent)
     if (k == 3) T.row(r++) = t2.transpose();
@@ -264,14 +267,13 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
     writeRows(sim, sd, bodies, at_point, plane_at_point, T, k, local_rows);
     // Tangential rows: the material point at the contact (slip velocity); normal
     // row: the sphere's centre, whose normal motion is exactly the gap's.
-    const pinocchio::SE3 at_center(Eigen::Matrix3d::Identity(), center_j);
     const Eigen::Vector3d acc_plane = pointAcceleration(sim, sd, bodies.minus, plane_at_point);
     const Eigen::Vector3d acc_point = pointAcceleration(sim, sd, bodies.plus, at_point) - acc_plane;
     // (a point contact, radius 0: the centre is the point, up to the rounding of the round trip
     // through world coordinates; its acceleration is then computed once)
-    const Eigen::Vector3d acc_center = c.radius == 0.0 && at_point.translation() == center_j
+    const Eigen::Vector3d acc_center = c.radius == 0.0 && at_point == center_j
                                            ? acc_point
-                                           : pointAcceleration(sim, sd, bodies.plus, at_center) - acc_plane;
+                                           : pointAcceleration(sim, sd, bodies.plus, center_j) - acc_plane;
     r = 0;
     if (k >= 2) {
       sd.drift[row + r] = t1.dot(acc_point);
@@ -290,13 +292,13 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
     // frame2 != 0 the point (frame2, offset2) of another body: a closed loop.
     const BlockBodies bodies = anchorBodies(sim, a);
     const Eigen::Vector3d point_j = model.frames[a.frame].placement.act(a.offset);
-    const pinocchio::SE3 at_point(Eigen::Matrix3d::Identity(), point_j);
+    const Eigen::Vector3d& at_point = point_j;
     Eigen::Vector3d other = a.target;
-    pinocchio::SE3 at_point2 = pinocchio::SE3::Identity();
+    Eigen::Vector3d at_point2 = Eigen::Vector3d::Zero();
     if (a.frame2 != 0) {
       const Eigen::Vector3d point2_j = model.frames[a.frame2].placement.act(a.offset2);
       other = jointPlacement(sim, sd, bodies.minus).act(point2_j);
-      at_point2 = pinocchio::SE3(Eigen::Matrix3d::Identity(), point2_j);
+      at_point2 = point2_j;
     }
     writeRows(sim, sd, bodies, at_point, at_point2, Eigen::Matrix3d::Identity(), 3, local_rows);
     sd.drift.segment<3>(row) = pointAcceleration(sim, sd, bodies.plus, at_point) -
