@@ -205,6 +205,12 @@ void partOperator(SystemWork& w) {
   } else if (w.W.rows() <= 6) {
     // (robots keep the rank update below: TALOS's 24 x 44 was 5 us slower coefficient-wise)
     w.A.noalias() = w.W.transpose().lazyProduct(w.W);
+  } else if (n <= 32) {
+    // a robot's few contacts (Solo-12: 12 rows of 18 coordinates): a dot product of W's contiguous
+    // columns per entry of the lower triangle, mirrored (Eigen's rank update, blocked for large
+    // matrices, spent ~8k instructions on Solo-12's 12 x 12)
+    for (Eigen::Index c = 0; c < n; ++c)
+      for (Eigen::Index r = c; r < n; ++r) w.A(r, c) = w.A(c, r) = w.W.col(r).dot(w.W.col(c));
   } else {
     w.A.setZero();
     w.A.selfadjointView<Eigen::Lower>().rankUpdate(w.W.transpose());
@@ -212,20 +218,23 @@ void partOperator(SystemWork& w) {
   }
 }
 
-// W = U^-1 W for U unit upper triangular (its strict upper triangle read), by rows from the last,
-// skipping U's zeros: Pinocchio's U is tree-sparse (U(i, j) != 0 only for j in i's subtree), so a
-// leg's rows take only that leg's. (Eigen's blocked triangular solve, ~13k instructions on Solo-12's
-// 18 x 12, was an eighth of its step.)
-void unitUpperSolveInPlace(const Eigen::MatrixXd& U, Eigen::MatrixXd& W) {
-  const Eigen::Index n = W.rows(), cols = W.cols();
-  for (Eigen::Index i = n - 2; i >= 0; --i)
-    for (Eigen::Index j = i + 1; j < n; ++j) {
+// W = D^-1/2 U^-1 X^T for U unit upper triangular (its strict upper triangle read) and X = J's
+// columns (those of the coordinates W covers): X's columns are W's rows, contiguous, so the back
+// substitution is column operations on X, from the last, skipping U's zeros (Pinocchio's U is
+// tree-sparse: U(i, j) != 0 only for j in i's subtree, so a leg's rows take only that leg's), then
+// one scaled transposition. (Eigen's blocked triangular solve on W spent ~13k instructions on
+// Solo-12's 18 x 12; row operations on W, strided, as many.)
+void scaledUnitUpperSolve(const Eigen::MatrixXd& U, const double* dinv, const std::vector<int>* index,
+                          Eigen::MatrixXd& X, Eigen::MatrixXd& W) {
+  const Eigen::Index s = X.cols();
+  for (Eigen::Index i = s - 2; i >= 0; --i)
+    for (Eigen::Index j = i + 1; j < s; ++j) {
       const double u = U(i, j);
-      if (u == 0.0) continue;
-      double* wi = W.data() + i;
-      const double* wj = W.data() + j;
-      for (Eigen::Index c = 0; c < cols; ++c) wi[c * n] -= u * wj[c * n];
+      if (u != 0.0) X.col(i) -= u * X.col(j);
     }
+  W.resize(s, X.rows());
+  for (Eigen::Index i = 0; i < s; ++i)
+    W.row(i) = std::sqrt(dinv[index != nullptr ? (*index)[static_cast<std::size_t>(i)] : i]) * X.col(i).transpose();
 }
 
 // W_s = D^-1/2 U^-1 J_s^T for every part, so that A = sum_s W_s^T W_s (symmetric by construction);
@@ -241,13 +250,12 @@ Eigen::Index delassusFactors(SimulatorData& sd) {
       // coordinates): the triangular solve on those coordinates only.
       const auto s = static_cast<Eigen::Index>(w.support.size());
       w.U_support.resize(s, s);
-      w.W.resize(s, n);
+      w.X.resize(n, s);
       for (Eigen::Index c = 0; c < s; ++c) {
         for (Eigen::Index r = 0; r < c; ++r) w.U_support(r, c) = w.data.U(w.support[r], w.support[c]);
-        w.W.row(c) = w.J.col(w.support[c]).transpose();
+        w.X.col(c) = w.J.col(w.support[c]);
       }
-      unitUpperSolveInPlace(w.U_support, w.W);
-      for (Eigen::Index c = 0; c < s; ++c) w.W.row(c) *= std::sqrt(w.data.Dinv[w.support[c]]);
+      scaledUnitUpperSolve(w.U_support, w.data.Dinv.data(), &w.support, w.X, w.W);
       // (W has more rows than 6: partOperator's rank update, as for any robot)
       continue;
     }
@@ -285,9 +293,8 @@ Eigen::Index delassusFactors(SimulatorData& sd) {
       if (transposed) std::fill(w.Wt.end() - 4, w.Wt.end(), 0.0);
       continue;
     }
-    w.W = w.J.transpose();
-    unitUpperSolveInPlace(w.data.U, w.W);
-    w.W = w.data.Dinv.cwiseSqrt().asDiagonal() * w.W;
+    w.X = w.J;
+    scaledUnitUpperSolve(w.data.U, w.data.Dinv.data(), nullptr, w.X, w.W);
     if (w.W.rows() == 6 && vectorKernels()) {
       // W^T by columns (row k of W contiguous), padded: the vector kernel of assembleFromPlan reads
       // a block's three values of row k four at a time (written here, while W is in cache)

@@ -206,6 +206,7 @@ struct SystemWork {
   std::vector<int> rows;  ///< the problem row of each row of J (contacts touching this part)
   Eigen::MatrixXd J;      ///< rows x nv of the part: its columns of the contact Jacobian
   Eigen::MatrixXd W;      ///< D^-1/2 U^-1 J^T (M = U D U^T)
+  Eigen::MatrixXd X;      ///< J's columns under W's back substitution (scratch)
   Eigen::MatrixXd A;      ///< W^T W = J M^-1 J^T of this part (eq. 22)
   /// The coordinates the contacts can move (J's nonzero columns and their ancestors) when they
   /// are few (a humanoid's two legs and base): W, U and D restricted to them.
