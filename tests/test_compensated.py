@@ -6,11 +6,8 @@ loses every digit. The compensated one must stay within eps |u| + gamma_n^2 (|A|
 exact value (computed with fractions), on every operator path: dense, sparse gathered by columns
 (a symmetric A: the simulator's), sparse scattered, each with and without the AVX2/FMA kernels.
 """
-import os
-import subprocess
-import sys
-
 import pytest
+from conftest import run_with_kernels
 
 CHECK = r"""
 import sys
@@ -80,10 +77,7 @@ print(worst, plain_bad)
 
 @pytest.mark.parametrize("kernels", ["0", "1"])
 def test_compensated_residual_is_within_its_bound_where_the_plain_product_is_not(kernels):
-    env = dict(os.environ, STICTION_VECTOR_KERNELS=kernels)
-    out = subprocess.run([sys.executable, "-c", CHECK], capture_output=True, text=True, env=env)
-    assert out.returncode == 0, out.stderr
-    worst, plain_bad = out.stdout.split()
+    worst, plain_bad = run_with_kernels(CHECK, kernels).split()
     assert float(worst) <= 1.0, f"compensated residual off by {worst} x its bound"
     assert int(plain_bad) >= 100, f"the cancelling rows do not cancel: plain product in bound on all but {plain_bad}"
 

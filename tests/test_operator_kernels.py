@@ -9,12 +9,9 @@ kernel (its product with |A| alongside) is held to the same bound. The block Cho
 triangular solves (the sticking step's) have their own kernel: a resting tower steps the same
 with and without it.
 """
-import os
-import subprocess
-import sys
-
 import numpy as np
 import pytest
+from conftest import run_with_kernels
 
 PRODUCTS = r"""
 from fractions import Fraction
@@ -78,10 +75,7 @@ np.save(sys.argv[1], np.concatenate([np.asarray(sim.data.q), [held]]))
 
 @pytest.mark.parametrize("kernels", ["0", "1"])
 def test_sparse_products_are_within_the_verdicts_bound(kernels):
-    env = dict(os.environ, STICTION_VECTOR_KERNELS=kernels)
-    out = subprocess.run([sys.executable, "-c", PRODUCTS], capture_output=True, text=True, env=env)
-    assert out.returncode == 0, out.stderr
-    worst, cases = out.stdout.split()
+    worst, cases = run_with_kernels(PRODUCTS, kernels).split()
     assert int(cases) == 30
     assert float(worst) <= 1.0, f"a product is off by {worst} x the verdict's rounding bound"
 
@@ -90,9 +84,7 @@ def test_a_resting_tower_steps_the_same_with_and_without_the_kernels(tmp_path):
     finals = []
     for kernels in ("0", "1"):
         path = tmp_path / f"q{kernels}.npy"
-        env = dict(os.environ, STICTION_VECTOR_KERNELS=kernels)
-        out = subprocess.run([sys.executable, "-c", TOWER, str(path)], capture_output=True, text=True, env=env)
-        assert out.returncode == 0, out.stderr
+        run_with_kernels(TOWER, kernels, path)
         finals.append(np.load(path))
     q0, q1 = finals[0][:-1], finals[1][:-1]
     held0, held1 = finals[0][-1], finals[1][-1]

@@ -56,16 +56,18 @@ std::shared_ptr<ContactProblem> makeProblem(const bp::object& A, const bp::objec
   return std::make_shared<ContactProblem>(std::move(op), std::move(bv), std::move(cons), tol);
 }
 
-// For the tests: the verdict's compensated residual A x - b (compensated.hpp) by the operator a
-// problem would hold: dense, scipy.sparse (scattered), or scipy.sparse declared symmetric (gathered
-// by columns, as the simulator's A).
+// For the tests: the operator a problem would hold for A: dense, scipy.sparse (scattered), or
+// scipy.sparse declared symmetric (gathered by columns, as the simulator's A).
+std::shared_ptr<DelassusOperator> testOperator(const bp::object& A, bool symmetric, const std::string& what) {
+  if (PyObject_HasAttrString(A.ptr(), "tocsc") && PyObject_HasAttrString(A.ptr(), "nnz"))
+    return std::make_shared<SparseDelassus>(toSparse(A), symmetric);
+  return std::make_shared<DenseDelassus>(toMatrix(A, what.c_str()));
+}
+
+// For the tests: the verdict's compensated residual A x - b (compensated.hpp).
 Eigen::VectorXd compensatedResidualOf(const bp::object& A, const bp::object& x, const bp::object& b,
                                       bool symmetric) {
-  std::shared_ptr<DelassusOperator> op;
-  if (PyObject_HasAttrString(A.ptr(), "tocsc") && PyObject_HasAttrString(A.ptr(), "nnz"))
-    op = std::make_shared<SparseDelassus>(toSparse(A), symmetric);
-  else
-    op = std::make_shared<DenseDelassus>(toMatrix(A, "_compensated_residual: A"));
+  const auto op = testOperator(A, symmetric, "_compensated_residual: A");
   const Eigen::VectorXd xv = toVector(x, "_compensated_residual: x", op->rows());
   const Eigen::VectorXd bv = toVector(b, "_compensated_residual: b", op->rows());
   Eigen::VectorXd y(op->rows());
@@ -74,13 +76,9 @@ Eigen::VectorXd compensatedResidualOf(const bp::object& A, const bp::object& x, 
 }
 
 // For the tests: the operator's double products (multiply, absMultiply, multiplyWithAbs's two),
-// to compare the vector kernels' with the portable loops' (the same operators as above).
+// to compare the vector kernels' with the portable loops'.
 bp::tuple operatorProductsOf(const bp::object& A, const bp::object& x, bool symmetric) {
-  std::shared_ptr<DelassusOperator> op;
-  if (PyObject_HasAttrString(A.ptr(), "tocsc") && PyObject_HasAttrString(A.ptr(), "nnz"))
-    op = std::make_shared<SparseDelassus>(toSparse(A), symmetric);
-  else
-    op = std::make_shared<DenseDelassus>(toMatrix(A, "_operator_products: A"));
+  const auto op = testOperator(A, symmetric, "_operator_products: A");
   const Eigen::VectorXd xv = toVector(x, "_operator_products: x", op->rows());
   Eigen::VectorXd y(op->rows()), y_abs(op->rows()), both(op->rows()), both_abs(op->rows());
   op->multiply(xv, y);

@@ -27,6 +27,19 @@ __attribute__((target("avx2,fma"))) double laneSum(__m256d v) {
   return _mm_cvtsd_f64(_mm_add_sd(half, _mm_unpackhi_pd(half, half)));
 }
 
+// A column's last entries (after the kernels' blocks) added to its lane sums, and the sums stored
+// (y or y_abs null: not wanted).
+inline void finishColumn(int p, int end, const int* inner, const double* value, const double* x, double sum,
+                         double abs_sum, double* y, double* y_abs) {
+  for (; p < end; ++p) {
+    const double xi = x[inner[p]];
+    sum += value[p] * xi;
+    abs_sum += std::abs(value[p]) * std::abs(xi);
+  }
+  if (y != nullptr) *y = sum;
+  if (y_abs != nullptr) *y_abs = abs_sum;
+}
+
 __attribute__((target("avx2,fma"))) void gatherProductAvx2(Eigen::Index n, const int* outer, const int* inner,
                                                            const double* value, const double* x, double* y,
                                                            double* y_abs) {
@@ -42,13 +55,8 @@ __attribute__((target("avx2,fma"))) void gatherProductAvx2(Eigen::Index n, const
       if (y_abs != nullptr) a = _mm256_fmadd_pd(_mm256_andnot_pd(sign, v), _mm256_andnot_pd(sign, xi), a);
     }
     double sum = laneSum(s), abs_sum = laneSum(a);
-    for (; p < end; ++p) {
-      const double xi = x[inner[p]];
-      sum += value[p] * xi;
-      abs_sum += std::abs(value[p]) * std::abs(xi);
-    }
-    if (y != nullptr) y[j] = sum;
-    if (y_abs != nullptr) y_abs[j] = abs_sum;
+    finishColumn(p, end, inner, value, x, sum, abs_sum, y != nullptr ? y + j : nullptr,
+                 y_abs != nullptr ? y_abs + j : nullptr);
   }
 }
 
@@ -108,13 +116,8 @@ __attribute__((target("avx2,fma"))) void runsOfThreeProductAvx2(Eigen::Index n, 
       second = !second;
     }
     double sum = laneSum(_mm256_add_pd(s0, s1)), abs_sum = laneSum(_mm256_add_pd(a0, a1));
-    for (; p < end; ++p) {
-      const double xi = x[inner[p]];
-      sum += value[p] * xi;
-      abs_sum += std::abs(value[p]) * std::abs(xi);
-    }
-    if (y != nullptr) y[j] = sum;
-    if (y_abs != nullptr) y_abs[j] = abs_sum;
+    finishColumn(p, end, inner, value, x, sum, abs_sum, y != nullptr ? y + j : nullptr,
+                 y_abs != nullptr ? y_abs + j : nullptr);
   }
 }
 #endif
