@@ -81,7 +81,7 @@ pinocchio::SE3 pointPlacement(const Eigen::Vector3d& point) { return pinocchio::
 // Jrel += sign [R, -[R r]x R]: the world velocity of the material point r (joint frame) of a free
 // flyer whose velocity is (v, omega) in its own frame.
 inline void addFreeBodyPointJacobian(const Eigen::Matrix3d& R, const Eigen::Vector3d& r, double sign,
-                              Eigen::Matrix<double, 3, 6>& Jrel) {
+                                     Eigen::Matrix<double, 3, 6>& Jrel) {
   const Eigen::Vector3d rw = R * r;
   Eigen::Matrix3d skew;
   skew << 0.0, -rw.z(), rw.y(), rw.z(), 0.0, -rw.x(), -rw.y(), rw.x(), 0.0;
@@ -113,32 +113,29 @@ void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& 
     if (sim.systems[s].free_body) {
       // One free flyer (v = (v, omega) in its own frame): a material point r (joint frame) moves at
       // R (v + omega x r) = R v - [R r]x R omega. (Pinocchio's frame Jacobian, 6 x 6 from the joint
-      // Jacobian, was half of a tower's kinematics.) Fixed sizes: the rows T Jrel in one product.
+      // Jacobian, was half of a tower's kinematics.) Fixed sizes throughout.
       const Eigen::Matrix3d& R = w.data.oMi[1].rotation();
       Eigen::Matrix<double, 3, 6> Jrel = Eigen::Matrix<double, 3, 6>::Zero();
       if (partOf(sim, b.plus) == s) addFreeBodyPointJacobian(R, at_plus, 1.0, Jrel);
       if (partOf(sim, b.minus) == s) addFreeBodyPointJacobian(R, at_minus, -1.0, Jrel);
-      const Eigen::Matrix<double, 3, 6> rows = T * Jrel;
       const int lr = sd.part_fill[s];
       sd.part_fill[s] += k;
-      for (int r = 0; r < k; ++r) w.J.row(lr + r) = rows.row(r);
+      for (int r = 0; r < k; ++r) w.J.row(lr + r) = T.row(r) * Jrel;  // (T's rows past k unset)
       local_rows[p] = lr;
       continue;
     }
     w.Jrel.setZero();
-    {
-      if (partOf(sim, b.plus) == s) {
-        w.J6.setZero();
-        pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.plus], pointPlacement(at_plus),
-                                    pinocchio::LOCAL_WORLD_ALIGNED, w.J6);
-        w.Jrel += w.J6.topRows<3>();
-      }
-      if (partOf(sim, b.minus) == s) {
-        w.J6.setZero();
-        pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.minus], pointPlacement(at_minus),
-                                    pinocchio::LOCAL_WORLD_ALIGNED, w.J6);
-        w.Jrel -= w.J6.topRows<3>();
-      }
+    if (partOf(sim, b.plus) == s) {
+      w.J6.setZero();
+      pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.plus], pointPlacement(at_plus),
+                                  pinocchio::LOCAL_WORLD_ALIGNED, w.J6);
+      w.Jrel += w.J6.topRows<3>();
+    }
+    if (partOf(sim, b.minus) == s) {
+      w.J6.setZero();
+      pinocchio::getFrameJacobian(m, w.data, sim.joint_local[b.minus], pointPlacement(at_minus),
+                                  pinocchio::LOCAL_WORLD_ALIGNED, w.J6);
+      w.Jrel -= w.J6.topRows<3>();
     }
     const int lr = sd.part_fill[s];
     sd.part_fill[s] += k;
@@ -156,8 +153,7 @@ Eigen::Vector3d pointAcceleration(const SimulatorModel& sim, SimulatorData& sd, 
   if (sim.systems[s].free_body) {
     // a free flyer at zero acceleration: R (omega x (v + omega x r)), its velocity in its own frame
     const pinocchio::Motion& vj = sd.parts[s].data.v[1];
-    const Eigen::Vector3d& r = at;
-    const Eigen::Vector3d v_point = vj.linear() + vj.angular().cross(r);
+    const Eigen::Vector3d v_point = vj.linear() + vj.angular().cross(at);
     return sd.parts[s].data.oMi[1].rotation() * vj.angular().cross(v_point);
   }
   return pinocchio::getFrameClassicalAcceleration(sim.systems[s].model, sd.parts[s].data, sim.joint_local[j],
