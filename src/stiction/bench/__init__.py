@@ -17,7 +17,7 @@ BENCHES = {"scaling": "scaling", "work-precision": "work_precision", "profiles":
 # `stiction bench all --out DIR`: every figure of docs/benchmarks.md
 ALL_RUNS = (
     ("scaling", "--sizes", "4", "16", "64", "128", "256", "512", "1024"),
-    ("scaling", "--layout", "tower", "--sizes", "4", "16", "64", "128", "256"),
+    ("scaling", "--layout", "tower", "--sizes", "4", "16", "64", "128", "256", "512", "1024"),
     ("work-precision",),
     ("profiles",),
     ("stability",),
