@@ -87,12 +87,13 @@ def test_nsgs_alone_stalls_on_the_heavy_stack():
 @pytest.mark.parametrize("seed", range(5))
 def test_default_recovers_where_newton_alone_stalls(seed):
     """The heavy stack at rest with b perturbed by 1 % (one contact lifts, the rest stick):
-    Newton from zero stalls (residual 1e-6 .. 1e-4); the default restarts Newton from ProxQP's
-    facetized-cone solution and converges (docs/warm-start.md)."""
+    Newton from zero stalls (residual 1e-6 .. 1e-4); the default converges, restarting Newton from
+    ProxQP's facetized-cone solution where its other stages stall (docs/warm-start.md; which seeds
+    need the restart depends on rounding: with the two-pivot LU, seed 0 converges without it)."""
     p = two_cube_stack(1e4, 0.3).problem
     rng = np.random.default_rng(seed)
     q = stiction.ContactProblem(p.A, p.b * (1 + 0.01 * rng.standard_normal(p.b.size)), p.constraints)
     alone = stiction.solve(q, solver="newton", tol=1e-10, max_iter=30)
     assert not alone.converged
     r = stiction.solve(q, tol=1e-10)
-    assert r.converged and r.relative_residual <= 1e-10 and "proxqp" in r.message
+    assert r.converged and r.relative_residual <= 1e-10, r.message
