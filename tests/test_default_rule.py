@@ -123,6 +123,42 @@ def test_small_problems_start_with_newton(name):
     assert r.converged and stage_names(r) == ["newton"], r.stages
 
 
+@pytest.mark.parametrize("name", [n for n in FCLIB_FILES if n.startswith("CubesH8--")])
+def test_a_cold_problem_whose_natural_map_sticks_everywhere_at_zero_is_the_sticking_step(name):
+    """From lambda = 0, when b lies strictly inside every shifted cone (|b_t| < mu (b_n - mu |b_t|):
+    the natural map of eq. 65 at zero is in its sticking regime for every block), the default tries
+    the all-stick solution by one factorization of A first. The CubesH8 problems (LMGC cubes at rest)
+    are all-stick: one solve, and the answer is A^-1 b (numpy's, to the tolerance)."""
+    problem, r = solve(name)
+    A, b = np.asarray(problem.A), np.asarray(problem.b)
+    B = b.reshape(-1, 3)
+    assert (np.hypot(B[:, 0], B[:, 1]) < 0.3 * (B[:, 2] - 0.3 * np.hypot(B[:, 0], B[:, 1]))).all()
+    assert r.converged and stage_names(r) == ["sticking step"] and r.iterations == 1, r.stages
+    assert np.linalg.norm(A @ np.asarray(r.lam) - b) <= 1e-8 * (1 + np.linalg.norm(b))
+    np.testing.assert_allclose(r.lam, np.linalg.solve(A, b), rtol=0, atol=1e-8 * np.abs(np.linalg.solve(A, b)).max())
+
+
+def test_a_cold_sticking_prediction_that_fails_hands_over_to_newton():
+    """The prediction at zero is only a prediction: two contacts pressed together side by side, each
+    with b inside its own shifted cone, but coupled so that the all-stick forces leave a cone (the
+    first contact's tangential force, 0.78, exceeds mu lambda_n = 0.5). The sticking step says so,
+    Newton solves, and in the answer that contact slides while the other sticks."""
+    mu = 0.5
+    A = np.eye(6)
+    A[0, 5] = A[5, 0] = 0.6  # contact 1's tangential row couples to contact 2's normal row
+    b = np.array([0.1, 0.0, 1.0, 0.0, 0.0, 1.0])
+    B = b.reshape(-1, 3)
+    assert (np.hypot(B[:, 0], B[:, 1]) < mu * (B[:, 2] - mu * np.hypot(B[:, 0], B[:, 1]))).all()
+    x = np.linalg.solve(A, b).reshape(-1, 3)
+    assert not (np.hypot(x[:, 0], x[:, 1]) < mu * x[:, 2]).all()  # the all-stick forces leave a cone
+    problem = stiction.spatial_problem(A, b, [mu, mu])
+    r = stiction.solve(problem, tol=1e-10)
+    assert r.converged and stage_names(r)[:2] == ["sticking step", "newton"], r.stages
+    assert r.stages[0].outcome == "not all sticking"
+    assert r.exact_law.relative_residual <= 1e-9
+    assert list(r.states) == [stiction.ContactState.slip, stiction.ContactState.stick]
+
+
 def test_a_large_dense_problem_keeps_the_gauss_seidel_prelude(rng):
     """Above 384 rows but dense (more than 10 % nonzero): NSGS first, as before the rule."""
     nc = 140

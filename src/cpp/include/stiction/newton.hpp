@@ -78,9 +78,11 @@ class NewtonSolver final : public ContactSolver {
 /// converge (measured on the 36 FCLib problems and the simulator's scenes: docs/solvers.md,
 /// "The default's rule").
 /// - First, when the initial guess is strictly inside every cone (a warm start where every
-///   contact was closed and sticking: a robot standing, a box at rest, a tower), the all-stick
-///   solution (u = A lambda - b = 0, eq. 65 with every block inside its cone) by one proximal
-///   factorization (stickingStep); kept only if the stopping test passes.
+///   contact was closed and sticking: a robot standing, a box at rest, a tower), or when it is
+///   zero and the natural map there puts every block in its sticking regime (b inside the
+///   shifted cones: a cold problem at rest, CubesH8), the all-stick solution (u = A lambda - b =
+///   0, eq. 65 with every block inside its cone) by one proximal factorization (stickingStep);
+///   kept only if the stopping test passes.
 /// - Small problems (<= kNewtonFirstRows rows: a robot's feet, a box's corners): Newton
 ///   first, then Newton from ProxQP's facetized-cone solution if that failed.
 /// - Large sparse problems (> kAdmmAboveRows rows, <= 10 % nonzero): cold, with at most
