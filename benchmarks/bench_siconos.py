@@ -14,9 +14,12 @@ else dense), q and mu in Siconos' (n, t1, t2) order. Measure: the relative natur
 the De Saxce problem on the W as stored (||lambda - P_K(lambda - (u + E s(u)))|| / ||q||, Siconos'
 own scaling), computed here by stiction for every solver's answer; "solved" means <= 1e-8 by that
 measure, whatever the solver claims. Time: the median over repeats (until 0.5 s are spent and at
-least 3 solves done, or 2 s; at most 20,000 solves) of the solve's own time (stiction: ``result.seconds``, the C++ solve and its verdict; Siconos: its
-``fc3d_driver`` call timed in its process); at most ``--time-limit`` seconds per solve (Siconos: the subprocess is
-stopped). Settings: tolerance ``--tol`` for every solver, 10,000 iterations (NSN-AC: 1,000).
+least 3 solves done, or 2 s; at most 20,000 solves) of the solve's own time (stiction:
+``result.seconds``, the C++ solve and its verdict; Siconos: its ``fc3d_driver`` call timed in its
+process); at most ``--time-limit`` seconds per solve (Siconos: the subprocess is stopped). Problems
+of at most 64 rows are timed in 5 rounds, each stiction then every Siconos solver; the reported
+ratio is the median of the rounds' ratios. Settings: tolerance ``--tol`` for every solver, 10,000
+iterations (NSN-AC: 1,000).
 """
 from __future__ import annotations
 

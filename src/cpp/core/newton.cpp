@@ -47,65 +47,50 @@ Eigen::Matrix<double, K, K> coneProjectionJacobian(const Eigen::Matrix<double, K
   return J;
 }
 
-// Every block strictly inside its cone: a unilateral row pushing, a friction block's tangential
-// force below mu times a positive normal force (bilateral rows: any value), by a relative margin:
-// a block at the edge of slipping (statically indeterminate friction left at mu |lambda_n| by an
-// earlier solve, as in a grid of resting cubes) would most likely leave the cone in the
-// all-stick solution, and the factorization would be wasted.
+// Every block of x strictly inside its cone: a unilateral row pushing, a friction block's
+// tangential part below mu times a positive normal part (bilateral rows: any value), by a relative
+// margin: a block at the edge of slipping (statically indeterminate friction left at mu |lambda_n|
+// by an earlier solve, as in a grid of resting cubes) would most likely leave the cone in the
+// all-stick solution, and the factorization would be wasted. With de_saxce, the normal part is
+// first shifted by De Saxce's term, x_n - mu |x_t| (see stickingAtZero).
 constexpr double kInsideMargin = 1e-6;
 
-bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& lam) {
+bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& x, bool de_saxce = false) {
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
-  for (std::size_t i = 0; i < cons.size(); ++i) {
-    const Eigen::Index o = off[i];
-    switch (cons[i].kind) {
-      case ConstraintKind::kBilateral: break;
-      case ConstraintKind::kUnilateral:
-        if (!(lam[o] > 0.0)) return false;
-        break;
-      case ConstraintKind::kPlanarFriction:
-        if (!(std::abs(lam[o]) < (1.0 - kInsideMargin) * cons[i].mu * lam[o + 1])) return false;
-        break;
-      case ConstraintKind::kSpatialFriction:
-        if (!(norm2(lam[o], lam[o + 1]) < (1.0 - kInsideMargin) * cons[i].mu * lam[o + 2])) return false;
-        break;
-    }
-  }
-  return true;
-}
-
-// At lambda = 0 the natural map of eq. 65 puts every block in its sticking regime: z = -kappa u
-// - kappa mu |u_t| e_n with u = -b strictly inside the cone (|b_t| < mu (b_n - mu |b_t|), b_n > 0
-// for a unilateral row; bilateral rows: always). Newton's first step from zero then aims at the
-// all-stick solution, but regularised (its shift is largest there, ~1 % of the scaled Jacobian:
-// CubesH8-27 took 4 steps, 0.019, 3e-4, 9e-8, 8e-15); one factorization of A reaches it. Only a
-// prediction: the sticking step's stopping test decides, and Newton follows if it fails.
-bool stickingAtZero(const ContactProblem& problem) {
-  const auto& cons = problem.constraints();
-  const auto& off = problem.offsets();
-  const Eigen::VectorXd& b = problem.b();
+  const double shift = de_saxce ? 1.0 : 0.0;
   for (std::size_t i = 0; i < cons.size(); ++i) {
     const Eigen::Index o = off[i];
     const double mu = cons[i].mu;
     switch (cons[i].kind) {
       case ConstraintKind::kBilateral: break;
       case ConstraintKind::kUnilateral:
-        if (!(b[o] > 0.0)) return false;
+        if (!(x[o] > 0.0)) return false;
         break;
       case ConstraintKind::kPlanarFriction: {
-        const double bt = std::abs(b[o]);
-        if (!(bt < (1.0 - kInsideMargin) * mu * (b[o + 1] - mu * bt))) return false;
+        const double t = std::abs(x[o]);
+        if (!(t < (1.0 - kInsideMargin) * mu * (x[o + 1] - shift * mu * t))) return false;
         break;
       }
       case ConstraintKind::kSpatialFriction: {
-        const double bt = norm2(b[o], b[o + 1]);
-        if (!(bt < (1.0 - kInsideMargin) * mu * (b[o + 2] - mu * bt))) return false;
+        const double t = norm2(x[o], x[o + 1]);
+        if (!(t < (1.0 - kInsideMargin) * mu * (x[o + 2] - shift * mu * t))) return false;
         break;
       }
     }
   }
   return true;
+}
+
+// At lambda = 0 the natural map of eq. 65 puts every block in its sticking regime when its
+// argument there, -kappa (u + mu |u_t| e_n) with u = -b, is strictly inside the cone: b inside the
+// cones once shifted by De Saxce's term (|b_t| < mu (b_n - mu |b_t|); unilateral rows b_n > 0).
+// Newton's first step from zero then aims at the all-stick solution, but regularised (its shift is
+// largest there, ~1 % of the scaled Jacobian: CubesH8-27 took 4 steps, 0.019, 3e-4, 9e-8, 8e-15);
+// one factorization of A reaches it. Only a prediction: the sticking step's stopping test decides,
+// and Newton follows if it fails.
+bool stickingAtZero(const ContactProblem& problem) {
+  return strictlyInsideCones(problem, problem.b(), /*de_saxce=*/true);
 }
 
 // Entries A stores (a dense A: its nonzeros).
