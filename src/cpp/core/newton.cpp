@@ -215,6 +215,106 @@ void SmallDenseLU::solve(Eigen::VectorXd& x) const {
   }
 }
 
+namespace {
+
+// No entry of the dense A outside the square diagonal blocks of its constraints.
+bool blocksUncoupled(const ContactProblem& problem) {
+  const Eigen::MatrixXd& A = problem.delassus().dense();
+  const Eigen::Index m = A.rows();
+  const auto& cons = problem.constraints();
+  const auto& off = problem.offsets();
+  for (std::size_t i = 0; i < cons.size(); ++i) {
+    const Eigen::Index begin = off[i], end = off[i] + cons[i].size;
+    for (Eigen::Index j = begin; j < end; ++j) {
+      const double* column = A.data() + j * m;
+      for (Eigen::Index r = 0; r < begin; ++r)
+        if (column[r] != 0.0) return false;
+      for (Eigen::Index r = end; r < m; ++r)
+        if (column[r] != 0.0) return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+// x = -a^-1 f for one k x k block (k <= 3, column-major a, eps added to its diagonal) by Gaussian
+// elimination with partial pivoting, in registers (Eigen's fixed-size PartialPivLU spent ~360
+// instructions on a 3 x 3). False, x unset, when a pivot is below `pivot_floor` times the block's
+// largest entry (0: never; a zero pivot then gives non-finite values, as the whole system's LU).
+template <int K>
+bool negatedBlockSolve(const double* a, Eigen::Index stride, double eps, const double* f, double* x,
+                       double pivot_floor) {
+  double m[K][K], r[K], big = 0.0;
+  for (int i = 0; i < K; ++i) {
+    for (int j = 0; j < K; ++j) {
+      m[i][j] = a[i + j * stride];
+      big = std::max(big, std::abs(m[i][j]));
+    }
+    m[i][i] += eps;
+    r[i] = -f[i];
+  }
+  for (int k = 0; k < K; ++k) {
+    int p = k;
+    for (int i = k + 1; i < K; ++i)
+      if (std::abs(m[i][k]) > std::abs(m[p][k])) p = i;
+    if (p != k) {
+      for (int j = 0; j < K; ++j) std::swap(m[k][j], m[p][j]);
+      std::swap(r[k], r[p]);
+    }
+    if (!(std::abs(m[k][k]) > pivot_floor * big) && pivot_floor > 0.0) return false;
+    for (int i = k + 1; i < K; ++i) {
+      const double l = m[i][k] / m[k][k];
+      for (int j = k + 1; j < K; ++j) m[i][j] -= l * m[k][j];
+      r[i] -= l * r[k];
+    }
+  }
+  for (int k = K - 1; k >= 0; --k) {
+    double v = r[k];
+    for (int j = k + 1; j < K; ++j) v -= m[k][j] * x[j];
+    x[k] = v / m[k][k];
+  }
+  return true;
+}
+
+// Below this relative pivot a block's Newton system counts as singular: it gets the shift.
+constexpr double kUncoupledPivotFloor = 1e-8;
+
+void NewtonSolver::solveUncoupled(const ContactProblem& problem, double eps) {
+  // Each block's square of dF on its own (the LU of the whole 9 x 9 system of Toy FC3D_Example1
+  // was a quarter of its solve). Unshifted where the block is well-conditioned: the shift eps is
+  // there for rank-deficient systems (a tower's), and capped at 1e-2 it made the first step from
+  // lambda = 0 1 % off, two more steps to repair (Toy FC3D_Example1: 3 steps, now 1). A block
+  // with a small pivot gets the shift, as the whole system would.
+  const auto& cons = problem.constraints();
+  const auto& off = problem.offsets();
+  const Eigen::Index m = F_.size();
+  step_.resize(m);
+  for (std::size_t i = 0; i < cons.size(); ++i) {
+    const Eigen::Index o = off[i];
+    const double* a = J_.data() + o + o * m;
+    const double* f = F_.data() + o;
+    double* x = step_.data() + o;
+    switch (cons[i].size) {
+      case 1:
+        if (!negatedBlockSolve<1>(a, m, 0.0, f, x, kUncoupledPivotFloor)) negatedBlockSolve<1>(a, m, eps, f, x, 0.0);
+        break;
+      case 2:
+        if (!negatedBlockSolve<2>(a, m, 0.0, f, x, kUncoupledPivotFloor)) negatedBlockSolve<2>(a, m, eps, f, x, 0.0);
+        break;
+      case 3:
+        if (!negatedBlockSolve<3>(a, m, 0.0, f, x, kUncoupledPivotFloor)) negatedBlockSolve<3>(a, m, eps, f, x, 0.0);
+        break;
+      default: {  // (a bilateral block of another size)
+        const int k = cons[i].size;
+        Eigen::MatrixXd block = J_.block(o, o, k, k);
+        block.diagonal().array() += eps;
+        step_.segment(o, k) = -block.partialPivLu().solve(F_.segment(o, k));
+      }
+    }
+  }
+}
+
 void NewtonSolver::evaluate(const ContactProblem& problem, const Eigen::VectorXd& lam, bool jacobian) {
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
@@ -231,7 +331,12 @@ void NewtonSolver::evaluate(const ContactProblem& problem, const Eigen::VectorXd
   F_.resize(m);
   const bool dense_jacobian = jacobian && !sparse_;
   const bool sparse_jacobian = jacobian && sparse_;
-  if (dense_jacobian) J_.setZero(m, m);
+  if (dense_jacobian) {
+    if (uncoupled_)
+      J_.resize(m, m);  // (its diagonal blocks written below; nothing else read)
+    else
+      J_.setZero(m, m);
+  }
   // Sparse: each block's rows of the Jacobian are G A_(block rows) + D on the diagonal block,
   // G and D k x k, stored here and applied to A's pattern by fillSparseJacobian.
   auto store = [&](std::size_t i, const auto& G, const auto& D) {
@@ -304,6 +409,11 @@ void NewtonSolver::evaluate(const ContactProblem& problem, const Eigen::VectorXd
           }
           if (sparse_jacobian) {
             store(i, G, Eigen::Matrix3d(Eigen::Matrix3d::Identity() - JP));
+            break;
+          }
+          if (uncoupled_) {  // only the diagonal block is read (solveUncoupled)
+            J_.block<3, 3>(o, o).noalias() = G * A.block<3, 3>(o, o);
+            J_.block<3, 3>(o, o) += Eigen::Matrix3d::Identity() - JP;
             break;
           }
           // one pass over A's three rows (column-major: three neighbours per column)
@@ -435,6 +545,7 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   // dense step.
   sparse_ = m > SmallDenseLU::kMaxRows && AdmmSolver::factorsSparsely(problem);
   if (sparse_) prepareSparse(problem);
+  uncoupled_ = !sparse_ && m <= SmallDenseLU::kMaxRows && blocksUncoupled(problem);
   diagonal_.resize(m);  // (no allocation once sized: the simulator runs this every step)
   problem.delassus().diagonal(diagonal_);
   kappa_.resize(cons.size());
@@ -471,6 +582,8 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
       }
       step_ = sparse_lu_.solve(F_);
       step_ = -step_;
+    } else if (uncoupled_) {
+      solveUncoupled(problem, eps);
     } else if (m <= SmallDenseLU::kMaxRows) {
       J_.diagonal().array() += eps;
       small_lu_.compute(J_);  // (J_ is rebuilt before its next use)

@@ -34,7 +34,9 @@ void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen:
                     const Eigen::Ref<const Eigen::VectorXd>& u, std::vector<ContactState>& states) {
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
-  const Eigen::VectorXd diag = problem.delassus().diagonal();
+  thread_local Eigen::VectorXd diag;  // (no allocation per solve once sized)
+  diag.resize(problem.numRows());
+  problem.delassus().diagonal(diag);
   states.resize(cons.size());
   // Tangential speeds below this are solver noise, not sliding.
   const double speed_floor = 1.5e-8 * std::max(problem.b().lpNorm<Eigen::Infinity>(), 1e-300);
@@ -191,7 +193,6 @@ void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSet
   result.residual_bound = measures.bound / scale;
   result.precision_floor = measures.floor / scale;
   result.lambda_norm = result.lam.norm();
-  classifyStates(problem, result.lam, result.u, result.states);
   const bool finite = std::isfinite(measures.natural_map) && std::isfinite(measures.bound) && result.lam.allFinite();
   if (finite && measures.natural_map + measures.bound <= threshold) {
     result.status = SolveStatus::kConverged;
@@ -251,6 +252,7 @@ void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSet
   }
   result.divergence_candidates.clear();
   measureExactLaw(problem, result.lam, result.exact_law, kRelativeSpeedFloor, &result.u);
+  result.states = result.exact_law.states;  // (classifyStates of the same lambda and u)
   result.seconds = elapsed();
 }
 

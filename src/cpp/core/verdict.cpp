@@ -193,7 +193,7 @@ void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<cons
   double gamma = (chain + 2.0) * kEps;
   if (fresh_u != nullptr) {
     ud = *fresh_u;
-  } else {
+  } else {  // (by multiply, as every other residual of this lambda: the same rounding)
     ud.resize(m);
     problem.delassus().multiply(lam, ud);
     ud -= problem.b();
@@ -285,7 +285,9 @@ InfeasibilityCertificate findInfeasibility(const ContactProblem& problem,
   const Eigen::VectorXd& b = problem.b();
   const Eigen::Index m = problem.numRows();
   if (m == 0) return best;
-  const Eigen::VectorXd diag = A.diagonal();
+  thread_local Eigen::VectorXd diag;  // (every solve runs this first: no allocation once sized)
+  diag.resize(m);
+  A.diagonal(diag);
   const double max_diag = diag.cwiseAbs().maxCoeff();
   // 1. Rows that nothing moves (a contact on an immovable body) but b pushes closed:
   //    u_n = -b_n < 0 whatever lambda. Only nearly-zero diagonals can be that.

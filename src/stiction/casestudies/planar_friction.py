@@ -94,6 +94,7 @@ FORCE_ANGLE_DEG = 135.0  # direction of f_e from V0
 DURATION = 0.5  # [s] of the 0.9 F runs (the mass stops after ~0.2 s)
 SLIDE_DURATION = 0.5  # [s] of the 1.1 F runs
 REST_DURATION = 1.0  # [s] from rest under 0.9 F
+SOLVER_TOLERANCE = 1e-10  # the simulator's default: natural map <= 1e-10 ||b||
 SPEED_FLOOR = 1e-9  # [m/s] below it ||qdot|| is at the solver's precision (tolerance 1e-10 x ||b||)
 DECAY_FLOOR = 1e-7  # [m/s] the exponential tail is fitted from entering it down to this speed
 PENALTY_H = 1e-3  # [s] the penalty model's step
@@ -341,7 +342,12 @@ def run(quick: bool = False) -> CaseStudyResult:
             # relative to the small speeds of the tail its steps are looser than rk4's
             Check(f"0.9 F, {tag}: exponential rest, fitted decay rate x delta (qddot = -qdot/delta)",
                   r["decay_rate_x_delta"], 1.0, 1e-5 if r["mode"] == "rk4" else 1e-3),
-            Check(f"0.9 F, {tag}: normal force / (m g) - 1 (so F = mu m g)", r["max_normal_force_error"], 0.0, 1e-9),
+            # what the solver promises (tolerance 1e-10 ||b||, b's rows here at most g, ||f_e|| / m and
+            # (2 zeta / delta) ||qdot|| <= ||v0|| / delta; A = 1 / m), as a fraction of m g: 3.5e-9 at
+            # delta = 3e-3 (measured 1.0e-9 there: an exact Newton step lands inside the tolerance)
+            Check(f"0.9 F, {tag}: normal force / (m g) - 1 (so F = mu m g)", r["max_normal_force_error"], 0.0,
+                  SOLVER_TOLERANCE * (GRAVITY + np.linalg.norm(external_force(0.9)) / MASS
+                                      + np.linalg.norm(V0) / r["delta"]) / GRAVITY),
         ]
     checks.append(Check("0.9 F: eq. 91's d(||qdot||^2/2)/dt at every recorded moving state (max) [m^2/s^3]",
                         max(r["max_eq91_rate"] for r in relaxed), 0.0, 0.0, "<="))

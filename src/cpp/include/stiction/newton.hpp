@@ -55,10 +55,16 @@ class NewtonSolver final : public ContactSolver {
   /// F(lam) into F_, and (if jacobian) its generalized Jacobian into J_.
   void evaluate(const ContactProblem& problem, const Eigen::VectorXd& lam, bool jacobian);
 
+  /// (dF + eps I) step = -F block by block, when A couples no two blocks (uncoupled_).
+  void solveUncoupled(const ContactProblem& problem, double eps);
+
   Eigen::VectorXd kappa_, diagonal_, u_, F_, trial_, step_;
   Eigen::MatrixXd J_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
   SmallDenseLU small_lu_;
+  /// A dense A with no entry outside its blocks' diagonal squares (FCLib's Toy FC3D_Example1:
+  /// A = I; any one-contact problem): dF is block diagonal too, so the Newton system splits.
+  bool uncoupled_ = false;
 
   // The sparse path (a sparse A above SmallDenseLU::kMaxRows rows).
   /// The Jacobian's pattern (A's, widened to whole block rows, plus the diagonal blocks).
