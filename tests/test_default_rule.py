@@ -123,6 +123,36 @@ def test_small_problems_start_with_newton(name):
     assert r.converged and stage_names(r) == ["newton"], r.stages
 
 
+def test_uncoupled_blocks_take_unshifted_newton_steps():
+    """Toy FC3D_Example1: A = I, three identical sliding contacts. A couples no two blocks, so
+    Newton solves each block's 3 x 3 system alone and, where it is well-pivoted, without the
+    regularising shift (capped at 1e-2, it made the first step from zero 1 % off: 3 steps). With
+    A = I the answer is closed-form: lambda_n = b_n, lambda_t = b_t when |b_t| <= mu b_n, else
+    mu b_n b_t / |b_t| (u_t = lambda_t - b_t opposite to lambda_t)."""
+    problem, r = solve("Toy--FC3D_Example1.dat", tol=1e-10)
+    assert r.converged and stage_names(r) == ["newton"] and r.stages[0].iterations == 1, r.stages
+    B, mu = np.asarray(problem.b).reshape(-1, 3), 0.1
+    bt = np.linalg.norm(B[:, :2], axis=1)
+    assert (bt > mu * B[:, 2]).all()  # every contact slides
+    expected = np.column_stack([mu * B[:, 2:3] * B[:, :2] / bt[:, None], B[:, 2]])
+    np.testing.assert_allclose(np.asarray(r.lam).reshape(-1, 3), expected, rtol=0, atol=1e-12)
+    assert list(r.states) == [stiction.ContactState.slip] * 3
+
+
+@pytest.mark.parametrize("b", [(0.3, 0.2, 1.0), (0.05, 0.2, 1.0)])
+def test_an_uncoupled_block_with_a_singular_newton_system_gets_the_shift(b):
+    """A contact whose second tangential direction nothing moves (A = diag(1, 0, 1)): the block's
+    unshifted Newton system has a zero pivot, so that block falls back to the shifted system (no
+    'singular Newton system', no non-finite step). The answer satisfies the exact law; lambda_n = b_n
+    (u_n = lambda_n - b_n = 0)."""
+    problem = stiction.spatial_problem(np.diag([1.0, 0.0, 1.0]), np.array(b), [0.5])
+    r = stiction.solve(problem, tol=1e-10)
+    assert r.converged and stage_names(r)[-1] == "newton" and r.stages[-1].outcome == "converged", r.stages
+    assert r.exact_law.relative_residual <= 1e-10
+    assert r.lam[2] == pytest.approx(1.0, abs=1e-9)
+    assert np.hypot(r.lam[0], r.lam[1]) <= 0.5 * r.lam[2] * (1 + 1e-9)
+
+
 @pytest.mark.parametrize("name", [n for n in FCLIB_FILES if n.startswith("CubesH8--")])
 def test_a_cold_problem_whose_natural_map_sticks_everywhere_at_zero_is_the_sticking_step(name):
     """From lambda = 0, when b lies strictly inside every shifted cone (|b_t| < mu (b_n - mu |b_t|):
