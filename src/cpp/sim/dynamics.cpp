@@ -64,6 +64,26 @@ void nonLinearEffectsFromKinematics(const pinocchio::Model& model, pinocchio::Da
   }
 }
 
+// M (its upper triangle, as Pinocchio's crba leaves it) from the same forward kinematics: the
+// composite-rigid-body backward pass in world coordinates, each column k of M the world-frame
+// composite inertia of k's joint applied to J's column k, dotted with the columns of k and its
+// ancestors (Pinocchio's parents_fromRow). crba repeated the forward pass (each joint's sin and
+// cos, placements) that forwardKinematics had just done: 12k of Solo-12's ~97k instructions a step.
+void massMatrixFromKinematics(const pinocchio::Model& model, pinocchio::Data& data) {
+  const int n = model.njoints;
+  for (int i = 1; i < n; ++i) data.oYcrb[i] = data.oMi[i].act(model.inertias[i]);
+  for (int i = n - 1; i >= 1; --i) {
+    const int nv_i = model.nvs[i], iv = model.idx_vs[i];
+    for (int k = iv; k < iv + nv_i; ++k) {
+      const pinocchio::Force F = data.oYcrb[i] * pinocchio::Motion(data.J.col(k));
+      for (int j = k; j >= 0; j = data.parents_fromRow[j])
+        data.M(j, k) = data.J.col(j).head<3>().dot(F.linear()) + data.J.col(j).tail<3>().dot(F.angular());
+    }
+    const auto parent = model.parents[i];
+    if (parent > 0) data.oYcrb[parent] += data.oYcrb[i];
+  }
+}
+
 // The same for one free flyer, whose motion subspace is the identity in its own frame: nle is
 // the force of rnea's backward pass in that frame, Y a_gf + v x* (Y v) (freeBodyKinematics fills
 // no joint Jacobian to rotate it with).
@@ -111,13 +131,16 @@ void partMassSolve(const SystemModel& part, pinocchio::Data& data, Eigen::Vector
     pinocchio::cholesky::solve(part.model, data, x);
 }
 
-// M of one part (crba; h kd + h^2 kp on its diagonal for an implicit PD over h > 0) and its
-// factor M = U D U^T, in w.data. Throws when M is not positive definite.
+// M of one part (from this q's kinematics; h kd + h^2 kp on its diagonal for an implicit PD over
+// h > 0) and its factor M = U D U^T, in w.data. Throws when M is not positive definite.
 void factorMass(const SystemModel& part, SystemWork& w, const JointControl& control, double implicit_pd_step) {
   const pinocchio::Model& model = part.model;
   // q as Eigen::Ref: the instantiation libpinocchio ships (extern template), not a fresh one
   // here (a VectorXd argument made this file take 55 s to compile instead of 14 s).
-  pinocchio::crba(model, w.data, Eigen::Ref<const Eigen::VectorXd>(w.q), pinocchio::Convention::LOCAL);
+  if (part.free_body)  // (freeBodyKinematics fills no joint Jacobian)
+    pinocchio::crba(model, w.data, Eigen::Ref<const Eigen::VectorXd>(w.q), pinocchio::Convention::LOCAL);
+  else
+    massMatrixFromKinematics(model, w.data);  // from this step's placements and joint Jacobian
   if (implicit_pd_step > 0.0) {
     // Implicit joint PD over a step h: tau(q+, v+) ~ kp (q_t - q - h v+) + kd (v_t - v+)
     // moves h kd + h^2 kp onto M's diagonal (stable for any gains; MuJoCo's implicitfast
