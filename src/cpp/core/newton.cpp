@@ -936,11 +936,11 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
     // further ones), then a few Newton steps from the best iterate met if it is nearly there
     // (on the degenerate Capsules, Newton from a near-solution point only takes tiny steps,
     // so no more than a few). True when the solve is finished.
-    auto admm_then_polish = [&](const char* converged_how) {
+    auto admm_then_polish = [&](const char* converged_how, int max_iterations) {
       const auto t1 = Clock::now();
       lam = initial_;
-      const int done = admm_.run(problem, lam, budget - used, tol, remaining(), 0.0, false, msg,
-                                 kAdmmHorizonPerRow * m);
+      const int done = admm_.run(problem, lam, std::min(max_iterations, budget - used), tol, remaining(), 0.0, false,
+                                 msg, kAdmmHorizonPerRow * m);
       admm_started = true;
       admm_state = lam;
       used += done;
@@ -990,10 +990,15 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
       //      its sparse Jacobian and LU (run()), before ADMM. Measured on FCLib to 1e-8: the
       //      Capsules 8-30 ms (ADMM 18-42), Spheres 10 ms (13), SpheresBox 80 ms (ADMM stalls
       //      after 25 ms, then the same Newton); KaplasTower (117k entries) 255 ms against
-      //      ADMM's 81: the LU fills in, hence the bound on A's entries. Warm-started solves
-      //      (a simulation's step) keep their path: sweeps, then ADMM.
-      if (settings.warm_start == WarmStart::kNone && storedEntries(problem) <= kSparseNewtonEntries) {
+      //      ADMM's 81: the LU fills in, hence the bound on A's entries.
+      //      Warm-started ones the same once the sweeps did not finish, from the guess (the
+      //      previous step's answer): a tower of 36 spinning boxes (432 rows, every interface
+      //      sliding) took 450-930 ADMM iterations (10-19 ms) to stall, then Newton from the
+      //      guess converged in 5-34 steps (3-13 ms); within the simulator's budget of 200
+      //      iterations ADMM used them all and 4 of 30 steps failed.
+      if (storedEntries(problem) <= kSparseNewtonEntries) {
         newton_from_initial = true;
+        lam = initial_;
         if (newton_from_here(50, "newton")) return finish("converged (newton)");
         if (unresolvable(newton_msg)) return finish(newton_msg + " (newton)");
         keep_best(lam, "newton");
@@ -1005,7 +1010,7 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
       //     NSGS prelude alone cost 10-100 ms and NSGS then Newton 0.15-4 s (Spheres: ADMM 20
       //     ms, NSGS 65 ms; KaplasTower: ADMM 0.08-0.13 s, NSGS 1.5 s; docs/solvers.md, "The
       //     default's rule").
-      if (admm_then_polish("converged (admm)")) return;
+      if (admm_then_polish("converged (admm)", budget)) return;
     } else {
       // 1c. Medium problems, and large dense ones: NSGS while it makes progress (a sweep
       //     costs one product with A), until its rate or its deceleration says it stalls.
@@ -1021,15 +1026,16 @@ void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings&
         // 0.15-8 s). From the initial guess, not the NSGS iterate: from there ADMM took 36
         // iterations instead of 12 on KaplasTower and crawled at 2e-8 for 400 iterations
         // on Capsules-i122 and -i101 (measured).
-        if (admm_then_polish("converged (nsgs, admm)")) return;
+        if (admm_then_polish("converged (nsgs, admm)", budget)) return;
       } else {
-        // Medium problems warm-started from the previous step (a simulation): ADMM from
-        // that guess. A tower of 20 cubes on 4 corners each (240 rows, A of rank <= 120):
-        // Newton stalled (no descent along its direction) from the NSGS iterate and from
-        // the guess, 22 ms per step, where ADMM from the guess converged in 4 iterations,
-        // 1.5 ms (measured on box-tower-20).
+        // Medium problems warm-started from the previous step (a simulation): a few ADMM
+        // iterations from that guess. A tower of 20 cubes on 4 corners each (240 rows, A of
+        // rank <= 120): Newton stalled (no descent along its direction) from the NSGS iterate
+        // and from the guess, 22 ms per step, where ADMM from the guess converged in 4
+        // iterations, 1.5 ms (measured on box-tower-20, before the sticking step). Where ADMM
+        // needs more than kWarmAdmmIterations, Newton does better (spinning towers).
         if (settings.warm_start != WarmStart::kNone && used < budget && !out_of_time() &&
-            admm_then_polish("converged (nsgs, admm)"))
+            admm_then_polish("converged (nsgs, admm)", kWarmAdmmIterations))
           return;
         // Medium problems (65-384 rows): Newton from the NSGS iterate; a dense step
         // costs a few ms (BoxesStack, OneObject, PerioBox, Confeti-ex13: 0.5-18 ms in all,

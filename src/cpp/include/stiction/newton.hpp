@@ -91,14 +91,15 @@ class NewtonSolver final : public ContactSolver {
 ///   kept only if the stopping test passes.
 /// - Small problems (<= kNewtonFirstRows rows: a robot's feet, a box's corners): Newton
 ///   first, then Newton from ProxQP's facetized-cone solution if that failed.
-/// - Large sparse problems (> kAdmmAboveRows rows, <= 10 % nonzero): cold, with at most
-///   kSparseNewtonEntries stored entries, Newton first (sparse Jacobian and LU); then ADMM
-///   (sparse factorization) until it converges or its best residual stops improving, then a few
-///   Newton steps from the best iterate if it is nearly there; warm-started, at most
-///   kWarmSweeps NSGS sweeps first, then ADMM.
+/// - Large sparse problems (> kAdmmAboveRows rows, <= 10 % nonzero): warm-started, at most
+///   kWarmSweeps NSGS sweeps first; then, with at most kSparseNewtonEntries stored entries,
+///   Newton from the guess (sparse Jacobian and LU); then ADMM (sparse factorization) until it
+///   converges or its best residual stops improving, then a few Newton steps from the best
+///   iterate if it is nearly there.
 /// - Otherwise NSGS while its rate promises to finish within ~m sweeps and does not
-///   decelerate; then Newton from the NSGS iterate (medium problems, <= kAdmmAboveRows rows)
-///   or ADMM as above (large dense ones).
+///   decelerate; then Newton from the NSGS iterate (medium problems, <= kAdmmAboveRows rows;
+///   warm-started, after at most kWarmAdmmIterations of ADMM from the guess) or ADMM as above
+///   (large dense ones).
 /// - Then Newton from the initial guess; if all that fails, alternating chunks of NSGS and
 ///   ADMM (500 iterations at most), each followed by a Newton attempt from its iterate.
 ///   Returns the best iterate met.
@@ -113,11 +114,15 @@ class DefaultSolver final : public ContactSolver {
   static constexpr Eigen::Index kAdmmAboveRows = 384;
   /// ADMM's stall horizon, in iterations per row (admm.hpp: switch_after).
   static constexpr double kAdmmHorizonPerRow = 10.0;
-  /// A cold large sparse problem whose A stores at most this many entries tries Newton (sparse
-  /// Jacobian and LU) before ADMM (measured: docs/solvers.md, "The default's rule").
+  /// A large sparse problem whose A stores at most this many entries tries Newton (sparse
+  /// Jacobian and LU) before ADMM (cold: from the guess; warm: after a few sweeps, from the guess) (measured: docs/solvers.md, "The default's rule").
   static constexpr Eigen::Index kSparseNewtonEntries = 50000;
   /// Gauss-Seidel sweeps tried before ADMM on a warm-started large sparse problem.
   static constexpr int kWarmSweeps = 10;
+  /// ADMM iterations from the guess on a warm-started medium problem before Newton: where it
+  /// helps (a tower at rest whose contacts are not all sticking) it converges in a few; a tower
+  /// of 24 spinning boxes took 440-910 to stall (7-13 ms) before Newton converged in 5-6 steps.
+  static constexpr int kWarmAdmmIterations = 50;
   /// Newton steps from the best iterate after ADMM stalls, if its residual is within
   /// kPolishWithin x the tolerance.
   static constexpr int kPolishSteps = 5;
