@@ -119,6 +119,41 @@ def test_free_body_contact_rows_match_pinocchio():
     assert row == J.shape[0] and checked >= 60  # 19 interfaces of 4 corners between two moving boxes
 
 
+@pytest.mark.parametrize("scene", ["solo12-stand", "talos-stand", "anymal-stand"])
+def test_robot_contact_rows_match_pinocchio(scene):
+    """A robot's contact rows (from the world-frame joint Jacobian of the step's kinematics: a
+    column (v_o, omega) moves a point p at v_o + omega x p, over the joint's ancestors) equal the
+    frame (t1, t2, n) times the point Jacobian from Pinocchio's own joint Jacobian of the whole
+    model, at the material point of contact (sphere centre - r n), joints moved and moving."""
+    sim = Simulator(load_scene(scene))
+    sim.rollout(0.02)
+    model = sim.scene.model
+    rng = np.random.default_rng(6)
+    q = np.asarray(sim.data.q).copy()
+    for j in range(1, model.njoints):  # revolute joints moved 0.02 rad on average (the feet still touch)
+        if model.joints[j].shortname() != "JointModelFreeFlyer":
+            q[model.joints[j].idx_q] += 0.02 * rng.standard_normal()
+    v = 0.3 * rng.standard_normal(model.nv)
+    _core.build_contact_problem(sim.model, sim.data, q, v, 1e-3, 0.5)
+    data = model.createData()
+    pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    J = np.asarray(sim.data.J)
+    halfspaces = sim.model.halfspaces
+    row = 0
+    for i in sim.data.active:
+        c = sim.scene.contacts[i]
+        h = halfspaces[c.halfspace]
+        assert h.frame == 0  # the ground
+        T = np.vstack([h.tangent1, h.tangent2, h.normal])
+        point = data.oMf[c.frame].act(np.asarray(c.offset)) - c.radius * np.asarray(h.normal)
+        expected = T @ point_jacobian(model, data, c.frame, point)
+        np.testing.assert_allclose(J[row:row + 3], expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+        row += 3
+    assert row == J.shape[0] >= 12
+
+
 def test_a_robots_operator_on_the_coordinates_its_contacts_move():
     """TALOS on its two soles: the contacts move the base and the legs, 18 of 38 coordinates; A is
     assembled from U, D and J restricted to those (their ancestors included) and equals

@@ -184,7 +184,6 @@ SystemWork::SystemWork(const SystemModel& s)
       nle(Eigen::VectorXd::Zero(s.model.nv)),
       v_free(Eigen::VectorXd::Zero(s.model.nv)),
       x(Eigen::VectorXd::Zero(s.model.nv)),
-      J6(Eigen::MatrixXd::Zero(6, s.model.nv)),
       Jrel(Eigen::Matrix3Xd::Zero(3, s.model.nv)) {}
 
 SimulatorData::SimulatorData(const SimulatorModel& sim)

@@ -213,7 +213,6 @@ struct SystemWork {
   std::vector<int> support;
   std::vector<char> in_support;
   Eigen::MatrixXd U_support;
-  Eigen::MatrixXd J6;     ///< 6 x nv: one point's Jacobian
   Eigen::Matrix3Xd Jrel;  ///< 3 x nv: one contact's relative point Jacobian
   std::vector<pinocchio::Force> forces;
   bool mass_factored = false;  ///< free body: data.M, U, D hold its constant mass matrix and factor
