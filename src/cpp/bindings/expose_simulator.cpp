@@ -149,23 +149,44 @@ void doBuild(const bp::object& sim_, const bp::object& data, const bp::object& q
   buildContactProblem(sim, d, q, v, delta, zeta);
 }
 
+// A numpy float64 array (rows x cols, or a vector when cols < 0) over a copy of `count` doubles:
+// one memcpy into a bytearray that the array keeps as its base (writable). The recordings are
+// row-major, so the first `rows` records are one contiguous block. (Copying them through an Eigen
+// column-major matrix, then eigenpy's conversion, was two copies, one of them strided: ~8 % of a
+// Solo-12 rollout, 0.7 us a step.)
+bp::object numpyArray(const double* data, Eigen::Index rows, Eigen::Index cols) {
+  // (not a static object: it would be released after the interpreter has finalized)
+  const bp::object frombuffer = bp::import("numpy").attr("frombuffer");
+  const Eigen::Index count = cols < 0 ? rows : rows * cols;
+  PyObject* bytes = PyByteArray_FromStringAndSize(reinterpret_cast<const char*>(data),
+                                                  static_cast<Py_ssize_t>(count * sizeof(double)));
+  if (bytes == nullptr) bp::throw_error_already_set();
+  const bp::object buffer{bp::handle<>(bytes)};
+  const bp::object array = frombuffer(buffer, "float64");
+  return cols < 0 ? array : array.attr("reshape")(rows, cols);
+}
+
 bp::dict recordingDict(const Recording& rec) {
   const int n = rec.records;  // the rows filled
   bp::dict out;
-  out["t"] = Eigen::VectorXd(rec.t.head(n));
-  out["q"] = Eigen::MatrixXd(rec.q.topRows(n));
-  out["v"] = Eigen::MatrixXd(rec.v.topRows(n));
-  out["lam"] = Eigen::MatrixXd(rec.lam.topRows(n));
-  out["contact_velocity"] = Eigen::MatrixXd(rec.contact_velocity.topRows(n));
-  out["gaps"] = Eigen::MatrixXd(rec.gaps.topRows(n));
-  out["states"] = Eigen::MatrixXd(rec.states.topRows(n));
-  out["rows"] = Eigen::MatrixXd(rec.rows.topRows(n));
-  out["anchor_lam"] = Eigen::MatrixXd(rec.anchor_lam.topRows(n));
-  out["residual"] = Eigen::VectorXd(rec.residual.head(n));
-  out["iterations"] = Eigen::VectorXd(rec.iterations.head(n));
-  out["converged"] = Eigen::VectorXd(rec.converged.head(n));
-  out["dt"] = Eigen::VectorXd(rec.dt.head(n));
-  out["timings"] = Eigen::MatrixXd(rec.timings.topRows(n));
+  const auto vector = [&](const char* name, const Eigen::VectorXd& x) { out[name] = numpyArray(x.data(), n, -1); };
+  const auto matrix = [&](const char* name, const Recording::Rows& x) {
+    out[name] = numpyArray(x.data(), n, x.cols());
+  };
+  vector("t", rec.t);
+  matrix("q", rec.q);
+  matrix("v", rec.v);
+  matrix("lam", rec.lam);
+  matrix("contact_velocity", rec.contact_velocity);
+  matrix("gaps", rec.gaps);
+  matrix("states", rec.states);
+  matrix("rows", rec.rows);
+  matrix("anchor_lam", rec.anchor_lam);
+  vector("residual", rec.residual);
+  vector("iterations", rec.iterations);
+  vector("converged", rec.converged);
+  vector("dt", rec.dt);
+  matrix("timings", rec.timings);
   return out;
 }
 
