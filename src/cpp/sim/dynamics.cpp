@@ -1,6 +1,9 @@
 // Stage 4, the Delassus stage: the mass matrix and its factor, the free acceleration,
 // then the contact problem's A = J M^-1 J^T (eq. 22) and b (eq. 27).
 #include <algorithm>
+#include <utility>
+
+#include <Eigen/SVD>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -677,6 +680,65 @@ void rightHandSide(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Ve
   // instead of -h J_t' v. Normal rows keep it: it predicts the gap. (It is added back
   // rather than left out, as it always was: b's rounding is part of the trajectories.)
   if (!tangential_drift) sd.b += sd.drift.cwiseProduct(sd.tangent_row);
+}
+
+void projectRedundantSets(const SimulatorModel& sim, SimulatorData& sd) {
+  // Contacts between the same two bodies measure one relative twist (v, omega): a row t of a
+  // contact at p is [t^T, (p x t)^T] (v, omega), so beyond 6 rows the set is redundant (a box's 4
+  // corners: 12 rows, rank 6) and J has a left null space there: nu^T J = 0, hence nu^T (A lambda
+  // - b) = -nu^T b whatever lambda. b's -J (...) part has no such component, but the normal rows'
+  // drift J'v and Psi / delta^2 of a tilted, moving set do (the tangential drift is dropped in
+  // time stepping): pile-24's step 234 had 4.2e-9 ||b|| there, so no lambda met the tolerance
+  // 1e-10 ||b||. Where that part exceeds a tenth of the tolerance, b loses it (its least-squares
+  // consistent value: nothing any lambda could produce is removed). Called only for a step whose
+  // solve missed the tolerance (solveContacts): an SVD per redundant set (every tower interface
+  // is one) would cost a tenth of a tower's step.
+  sd.inconsistent_groups = 0;
+  const std::size_t count = sd.blocks.size();
+  if (count < 3) return;
+  sd.block_order.resize(count);
+  for (std::size_t i = 0; i < count; ++i) sd.block_order[i] = static_cast<int>(i);
+  const auto key = [&](int i) { return std::make_pair(sd.blocks[i].plus, sd.blocks[i].minus); };
+  std::sort(sd.block_order.begin(), sd.block_order.end(), [&](int a, int b) { return key(a) < key(b); });
+  const double threshold = 0.1 * sim.settings.solver_settings.tolerance * sd.b.norm();
+  Eigen::MatrixXd G;
+  Eigen::VectorXd bg;
+  for (std::size_t first = 0; first < count;) {
+    std::size_t last = first + 1;
+    int rows = sd.blocks[sd.block_order[first]].k;
+    while (last < count && key(sd.block_order[last]) == key(sd.block_order[first]))
+      rows += sd.blocks[sd.block_order[last++]].k;
+    if (rows > 6) {
+      G.resize(rows, 6);
+      bg.resize(rows);
+      int r = 0;
+      for (std::size_t j = first; j < last; ++j) {
+        const SimulatorData::ContactBlock& block = sd.blocks[sd.block_order[j]];
+        for (int q = 0; q < block.k; ++q, ++r) {
+          const Eigen::Vector3d t = block.T.row(q).transpose();
+          G.row(r).head<3>() = t.transpose();
+          G.row(r).tail<3>() = block.point.cross(t).transpose();
+          bg[r] = sd.b[block.row + q];
+        }
+      }
+      const Eigen::JacobiSVD<Eigen::MatrixXd> svd(G, Eigen::ComputeFullU);
+      const Eigen::VectorXd& sv = svd.singularValues();
+      Eigen::Index rank = 0;
+      while (rank < sv.size() && sv[rank] > 1e-12 * sv[0]) ++rank;
+      const auto null = svd.matrixU().rightCols(rows - rank);
+      const Eigen::VectorXd component = null.transpose() * bg;
+      if (component.norm() > threshold) {
+        bg -= null * component;
+        r = 0;
+        for (std::size_t j = first; j < last; ++j) {
+          const SimulatorData::ContactBlock& block = sd.blocks[sd.block_order[j]];
+          for (int q = 0; q < block.k; ++q, ++r) sd.b[block.row + q] = bg[r];
+        }
+        ++sd.inconsistent_groups;
+      }
+    }
+    first = last;
+  }
 }
 
 }  // namespace stages

@@ -216,6 +216,17 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
   Eigen::Matrix3d T;
   std::array<int, 2> local_rows;
   Eigen::Index row = 0;
+  sd.blocks.clear();
+  auto keep_block = [&](const BlockBodies& bodies, Eigen::Index first, int k, const Eigen::Vector3d& point) {
+    SimulatorData::ContactBlock block;
+    block.plus = bodies.plus;
+    block.minus = bodies.minus;
+    block.row = first;
+    block.k = k;
+    block.T = T;
+    block.point = point;
+    sd.blocks.push_back(block);
+  };
   for (int i : sd.active) {
     const BlockBodies bodies = contactBodies(sim, i);
     const int k = sd.candidate_rows[i];
@@ -230,6 +241,7 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
       }
       T.row(k - 1) = n.transpose();
       writeRows(sim, sd, bodies, at_plus, at_minus, T, k, local_rows);
+      keep_block(bodies, row, k, p);
       // The drift of a coal row is that of a motion whose free-flyer origins keep
       // their world velocity (J c, c = omega x v on each free flyer's linear rows):
       // the material points' accelerations are not the gap's (a rolling sphere's
@@ -265,6 +277,7 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
     if (k == 3) T.row(r++) = t2.transpose();
     T.row(r) = n.transpose();
     writeRows(sim, sd, bodies, at_point, plane_at_point, T, k, local_rows);
+    keep_block(bodies, row, k, point_w);
     // Tangential rows: the material point at the contact (slip velocity); normal
     // row: the sphere's centre, whose normal motion is exactly the gap's.
     const Eigen::Vector3d acc_plane = pointAcceleration(sim, sd, bodies.minus, plane_at_point);

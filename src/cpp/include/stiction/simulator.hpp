@@ -233,6 +233,20 @@ class SimulatorData {
 
   // The last contact problem (active blocks in candidate order, then anchors).
   std::vector<int> active;           ///< candidate index of each active contact block
+  /// Each active contact block's bodies (joints of the world model: plus, minus), first row, rows,
+  /// frame rows (t1, t2, n as T's first k rows, world) and world point: what the rows measure, for
+  /// rightHandSide's consistency projection of redundant contact sets.
+  struct ContactBlock {
+    std::size_t plus = 0, minus = 0;
+    Eigen::Index row = 0;
+    int k = 0;
+    Eigen::Matrix3d T;
+    Eigen::Vector3d point;
+  };
+  std::vector<ContactBlock> blocks;
+  std::vector<int> block_order;  ///< scratch: blocks sorted by their pair of bodies
+  int inconsistent_groups = 0;   ///< redundant contact sets whose b was projected this step
+  Eigen::VectorXd b_before_projection;
   /// Rows of the problem: per contact (t1, t2, n), (t1, n) or (n), then anchors. The Jacobian
   /// J (rows x nv) is held by columns of parts (SystemWork::J); denseJacobian() assembles it.
   Eigen::Index rows = 0;
