@@ -280,6 +280,12 @@ bool negatedBlockSolve(const double* a, Eigen::Index stride, double eps, const d
 // Below this relative pivot a block's Newton system counts as singular: it gets the shift.
 constexpr double kUncoupledPivotFloor = 1e-8;
 
+// One block's Newton step: unshifted when well-pivoted, else with the shift eps.
+template <int K>
+void blockNewtonStep(const double* a, Eigen::Index stride, double eps, const double* f, double* x) {
+  if (!negatedBlockSolve<K>(a, stride, 0.0, f, x, kUncoupledPivotFloor)) negatedBlockSolve<K>(a, stride, eps, f, x, 0.0);
+}
+
 void NewtonSolver::solveUncoupled(const ContactProblem& problem, double eps) {
   // Each block's square of dF on its own (the LU of the whole 9 x 9 system of Toy FC3D_Example1
   // was a quarter of its solve). Unshifted where the block is well-conditioned: the shift eps is
@@ -296,15 +302,9 @@ void NewtonSolver::solveUncoupled(const ContactProblem& problem, double eps) {
     const double* f = F_.data() + o;
     double* x = step_.data() + o;
     switch (cons[i].size) {
-      case 1:
-        if (!negatedBlockSolve<1>(a, m, 0.0, f, x, kUncoupledPivotFloor)) negatedBlockSolve<1>(a, m, eps, f, x, 0.0);
-        break;
-      case 2:
-        if (!negatedBlockSolve<2>(a, m, 0.0, f, x, kUncoupledPivotFloor)) negatedBlockSolve<2>(a, m, eps, f, x, 0.0);
-        break;
-      case 3:
-        if (!negatedBlockSolve<3>(a, m, 0.0, f, x, kUncoupledPivotFloor)) negatedBlockSolve<3>(a, m, eps, f, x, 0.0);
-        break;
+      case 1: blockNewtonStep<1>(a, m, eps, f, x); break;
+      case 2: blockNewtonStep<2>(a, m, eps, f, x); break;
+      case 3: blockNewtonStep<3>(a, m, eps, f, x); break;
       default: {  // (a bilateral block of another size)
         const int k = cons[i].size;
         Eigen::MatrixXd block = J_.block(o, o, k, k);

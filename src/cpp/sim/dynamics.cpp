@@ -1,15 +1,15 @@
 // Stage 4, the Delassus stage: the mass matrix and its factor, the free acceleration,
 // then the contact problem's A = J M^-1 J^T (eq. 22) and b (eq. 27).
 #include <algorithm>
-#include <utility>
-
-#include <Eigen/SVD>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
+#include <utility>
+
+#include <Eigen/SVD>
 
 #include "stiction/vector_kernels.hpp"
 #ifdef STICTION_X86_KERNELS

@@ -163,6 +163,10 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   }
   solve(*sd.problem, *sd.solver, settings, sd.result, &sd.guess);
   int solve_iterations = sd.result.iterations;
+  // A retry's verdict replaces the first when it converged, or missed by less.
+  const auto better = [&](const SolverResult& retry) {
+    return retry.converged || (retry.status == SolveStatus::kNotConverged && retry.residual < sd.result.residual);
+  };
   if (exact && settings.warm_start == WarmStart::kGiven && sd.result.status == SolveStatus::kNotConverged) {
     // The previous step's impulses can lead the pipeline into a stall (measured: a 1e6 : 1 stack at
     // dt = 0.1 ms, Newton stalls from the warm start and ADMM runs out of budget on 58 of 5000 steps);
@@ -172,9 +176,7 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     settings.warm_start = WarmStart::kNone;
     solve(*sd.problem, *sd.solver, settings, sd.cold_result, nullptr);
     solve_iterations += sd.cold_result.iterations;
-    if (sd.cold_result.converged || (sd.cold_result.status == SolveStatus::kNotConverged &&
-                                     sd.cold_result.residual < sd.result.residual))
-      std::swap(sd.result, sd.cold_result);
+    if (better(sd.cold_result)) std::swap(sd.result, sd.cold_result);
   }
   if (exact && sd.result.status == SolveStatus::kNotConverged) {
     // b may ask what no lambda can give: contacts between the same two bodies beyond their 6
@@ -190,8 +192,7 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
       sd.guess = sd.result.lam;
       solve(*sd.problem, *sd.solver, settings, sd.cold_result, &sd.guess);
       solve_iterations += sd.cold_result.iterations;
-      if (sd.cold_result.converged || (sd.cold_result.status == SolveStatus::kNotConverged &&
-                                       sd.cold_result.residual < sd.result.residual)) {
+      if (better(sd.cold_result)) {
         std::swap(sd.result, sd.cold_result);
       } else {  // the answer kept is the original problem's: so is b
         sd.b = sd.b_before_projection;

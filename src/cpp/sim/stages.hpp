@@ -59,13 +59,14 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd);
 
 /// 4c. b of eq. 27 with Phi = nle - tau: J M^-1 Phi - J' v - (2 zeta / delta) J v - Psi / delta^2;
 /// without the J' v term on tangential rows when tangential_drift is false (time stepping).
+void rightHandSide(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v, double delta,
+                   double zeta, bool tangential_drift = true);
+
 /// b's part that no lambda can produce (in J's left null space over a set of contacts between the
 /// same two bodies with more rows than their relative twist's 6) removed when it exceeds a tenth
 /// of the solver's tolerance (solveContacts, for a step that missed it); sd.inconsistent_groups
 /// counts the sets changed.
 void projectRedundantSets(const SimulatorModel& sim, SimulatorData& sd);
-void rightHandSide(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v, double delta,
-                   double zeta, bool tangential_drift = true);
 
 /// 5. Solve eq. 65 for sd.A, sd.b (scaled by `scale`: h for impulses) with the model's
 /// formulation, warm-started from the previous lambda of the same candidates; per-candidate

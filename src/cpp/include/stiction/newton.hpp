@@ -115,7 +115,8 @@ class DefaultSolver final : public ContactSolver {
   /// ADMM's stall horizon, in iterations per row (admm.hpp: switch_after).
   static constexpr double kAdmmHorizonPerRow = 10.0;
   /// A large sparse problem whose A stores at most this many entries tries Newton (sparse
-  /// Jacobian and LU) before ADMM (cold: from the guess; warm: after a few sweeps, from the guess) (measured: docs/solvers.md, "The default's rule").
+  /// Jacobian and LU) from the guess before ADMM (warm-started: after a few sweeps; measured:
+  /// docs/solvers.md, "The default's rule").
   static constexpr Eigen::Index kSparseNewtonEntries = 50000;
   /// Gauss-Seidel sweeps tried before ADMM on a warm-started large sparse problem.
   static constexpr int kWarmSweeps = 10;

@@ -235,7 +235,7 @@ class SimulatorData {
   std::vector<int> active;           ///< candidate index of each active contact block
   /// Each active contact block's bodies (joints of the world model: plus, minus), first row, rows,
   /// frame rows (t1, t2, n as T's first k rows, world) and world point: what the rows measure, for
-  /// rightHandSide's consistency projection of redundant contact sets.
+  /// the consistency projection of redundant contact sets (projectRedundantSets, on a missed step).
   struct ContactBlock {
     std::size_t plus = 0, minus = 0;
     Eigen::Index row = 0;
