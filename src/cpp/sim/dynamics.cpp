@@ -41,53 +41,7 @@ namespace stages {
 
 namespace {
 
-// nle = C(q, v) v + g(q) (Pinocchio's rnea at zero acceleration) from the forward
-// kinematics already in `data` (placements, velocities, accelerations at q'' = 0)
-// and the world-frame joint Jacobian: the backward pass of rnea, in world
-// coordinates, without repeating the forward pass (saves ~1 us on Solo-12).
-void nonLinearEffectsFromKinematics(const pinocchio::Model& model, pinocchio::Data& data,
-                                    std::vector<pinocchio::Force>& forces, Eigen::VectorXd& nle) {
-  const int n = model.njoints;
-  forces.resize(n);
-  const Eigen::Vector3d minus_g = -model.gravity.linear();
-  for (int i = 1; i < n; ++i) {
-    const pinocchio::SE3& oMi = data.oMi[i];
-    // a_gf = a + gravity seen as an upward acceleration of the base, in frame i
-    const pinocchio::Motion a_gf(data.a[i].linear() + oMi.rotation().transpose() * minus_g, data.a[i].angular());
-    const pinocchio::Inertia& Y = model.inertias[i];
-    const pinocchio::Force f_local = Y * a_gf + data.v[i].cross(Y * data.v[i]);
-    forces[i] = oMi.act(f_local);
-  }
-  for (int i = n - 1; i >= 1; --i) {
-    const int nv_i = model.nvs[i], iv = model.idx_vs[i];
-    for (int k = iv; k < iv + nv_i; ++k)
-      nle[k] = data.J.col(k).head<3>().dot(forces[i].linear()) + data.J.col(k).tail<3>().dot(forces[i].angular());
-    const auto parent = model.parents[i];
-    if (parent > 0) forces[parent] += forces[i];
-  }
-}
-
-// M (its upper triangle, as Pinocchio's crba leaves it) from the same forward kinematics: the
-// composite-rigid-body backward pass in world coordinates, each column k of M the world-frame
-// composite inertia of k's joint applied to J's column k, dotted with the columns of k and its
-// ancestors (Pinocchio's parents_fromRow). crba repeated the forward pass (each joint's sin and
-// cos, placements) that forwardKinematics had just done: 12k of Solo-12's ~97k instructions a step.
-void massMatrixFromKinematics(const pinocchio::Model& model, pinocchio::Data& data) {
-  const int n = model.njoints;
-  for (int i = 1; i < n; ++i) data.oYcrb[i] = data.oMi[i].act(model.inertias[i]);
-  for (int i = n - 1; i >= 1; --i) {
-    const int nv_i = model.nvs[i], iv = model.idx_vs[i];
-    for (int k = iv; k < iv + nv_i; ++k) {
-      const pinocchio::Force F = data.oYcrb[i] * pinocchio::Motion(data.J.col(k));
-      for (int j = k; j >= 0; j = data.parents_fromRow[j])
-        data.M(j, k) = data.J.col(j).head<3>().dot(F.linear()) + data.J.col(j).tail<3>().dot(F.angular());
-    }
-    const auto parent = model.parents[i];
-    if (parent > 0) data.oYcrb[parent] += data.oYcrb[i];
-  }
-}
-
-// The same for one free flyer, whose motion subspace is the identity in its own frame: nle is
+// nle for one free flyer, whose motion subspace is the identity in its own frame: nle is
 // the force of rnea's backward pass in that frame, Y a_gf + v x* (Y v) (freeBodyKinematics fills
 // no joint Jacobian to rotate it with).
 void freeBodyNonLinearEffects(const pinocchio::Model& model, const pinocchio::Data& data, Eigen::VectorXd& nle) {
@@ -134,16 +88,15 @@ void partMassSolve(const SystemModel& part, pinocchio::Data& data, Eigen::Vector
     pinocchio::cholesky::solve(part.model, data, x);
 }
 
-// M of one part (from this q's kinematics; h kd + h^2 kp on its diagonal for an implicit PD over
-// h > 0) and its factor M = U D U^T, in w.data. Throws when M is not positive definite.
+// M of one part (a robot's: already from this step's kinematics, compositeBackwardPass; a free
+// body's: crba), h kd + h^2 kp on its diagonal for an implicit PD over h > 0, and its factor
+// M = U D U^T, in w.data. Throws when M is not positive definite.
 void factorMass(const SystemModel& part, SystemWork& w, const JointControl& control, double implicit_pd_step) {
   const pinocchio::Model& model = part.model;
   // q as Eigen::Ref: the instantiation libpinocchio ships (extern template), not a fresh one
   // here (a VectorXd argument made this file take 55 s to compile instead of 14 s).
   if (part.free_body)  // (freeBodyKinematics fills no joint Jacobian)
     pinocchio::crba(model, w.data, Eigen::Ref<const Eigen::VectorXd>(w.q), pinocchio::Convention::LOCAL);
-  else
-    massMatrixFromKinematics(model, w.data);  // from this step's placements and joint Jacobian
   if (implicit_pd_step > 0.0) {
     // Implicit joint PD over a step h: tau(q+, v+) ~ kp (q_t - q - h v+) + kd (v_t - v+)
     // moves h kd + h^2 kp onto M's diagonal (stable for any gains; MuJoCo's implicitfast
@@ -189,21 +142,20 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
     const pinocchio::Model& model = part.model;
     SystemWork& w = sd.parts[s];
     // A free body without joint PD: its mass matrix in its own frame is constant (factored at
-    // the first step). Else crba and the tree Cholesky every step.
+    // the first step). Else M (a robot's from stage 1's terms, a free body's by crba) and the
+    // tree Cholesky every step.
     bool pd_on_diagonal = false;
     if (implicit_pd_step > 0.0)
       for (int world : part.v_index) pd_on_diagonal = pd_on_diagonal || sd.control.kd[world] != 0.0 || sd.control.kp[world] != 0.0;
     const bool reuse = part.free_body && w.mass_factored && !pd_on_diagonal;
     w.mass_factored = part.free_body && !pd_on_diagonal;
+    if (!part.free_body) compositeBackwardPass(model, w.data, w.nle);  // M and nle (stage 1's terms)
     if (!reuse) {
       factorMass(part, w, sd.control, implicit_pd_step);
       w.has_free_body_scaling = part.free_body;
       if (part.free_body) freeBodyScaling(w);
     }
-    if (part.free_body)
-      freeBodyNonLinearEffects(model, w.data, w.nle);
-    else
-      nonLinearEffectsFromKinematics(model, w.data, w.forces, w.nle);
+    if (part.free_body) freeBodyNonLinearEffects(model, w.data, w.nle);
     gatherV(part, sd.tau, w.tau);
     w.v_free = w.tau - w.nle;
     partMassSolve(part, w.data, w.v_free);  // M^-1 (tau - nle): the free acceleration

@@ -4,7 +4,6 @@
 #include <stdexcept>
 #include <string>
 
-#include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
 
@@ -27,8 +26,13 @@ void forwardKinematics(const SimulatorModel& sim, SimulatorData& sd, const Eigen
       freeBodyKinematics(part.model, w);
       continue;
     }
+    if (!part.tree.empty()) {
+      treeKinematics(part, w);
+      continue;
+    }
     pinocchio::forwardKinematics(part.model, w.data, w.q, w.v, w.zero);
     pinocchio::computeJointJacobians(part.model, w.data);
+    worldFrameTerms(part.model, w.data);
   }
 }
 
@@ -74,9 +78,6 @@ std::array<int, 2> blockParts(const SimulatorModel& sim, const BlockBodies& b) {
   const int s1 = partOf(sim, b.plus), s2 = partOf(sim, b.minus);
   return {s1, s2 != s1 ? s2 : -1};
 }
-
-// A point of a joint's frame as the placement Pinocchio's frame functions take (axes the joint's).
-pinocchio::SE3 pointPlacement(const Eigen::Vector3d& point) { return pinocchio::SE3(Eigen::Matrix3d::Identity(), point); }
 
 // Jrel += sign [R, -[R r]x R]: the world velocity of the material point r (joint frame) of a free
 // flyer whose velocity is (v, omega) in its own frame.
@@ -160,9 +161,15 @@ Eigen::Vector3d pointAcceleration(const SimulatorModel& sim, SimulatorData& sd, 
     const Eigen::Vector3d v_point = vj.linear() + vj.angular().cross(at);
     return sd.parts[s].data.oMi[1].rotation() * vj.angular().cross(v_point);
   }
-  return pinocchio::getFrameClassicalAcceleration(sim.systems[s].model, sd.parts[s].data, sim.joint_local[j],
-                                                  pointPlacement(at), pinocchio::LOCAL_WORLD_ALIGNED)
-      .linear();
+  // a robot body: from its world-frame velocity (v_o, omega) and bias acceleration (a_o, alpha)
+  // (stage 1), the material point p moves at v_o + omega x p and accelerates at
+  // a_o + alpha x p + omega x (v_o + omega x p)
+  const pinocchio::Data& data = sd.parts[s].data;
+  const pinocchio::JointIndex local = sim.joint_local[j];
+  const Eigen::Vector3d p = data.oMi[local].act(at);
+  const pinocchio::Motion &ov = data.ov[local], &oa = data.oa[local];
+  const Eigen::Vector3d v_point = ov.linear() + ov.angular().cross(p);
+  return oa.linear() + oa.angular().cross(p) + ov.angular().cross(v_point);
 }
 
 // Row `local_row` of part s's J times the part's entries of the world vector x.

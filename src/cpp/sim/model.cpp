@@ -66,6 +66,7 @@ void splitIntoSystems(const pinocchio::Model& world, std::vector<SystemModel>& s
     part.q_start = contiguousStart(part.q_index);
     part.v_start = contiguousStart(part.v_index);
     part.free_body = part.model.njoints == 2 && part.model.joints[1].shortname() == "JointModelFreeFlyer";
+    if (!part.free_body) part.tree = treeOf(part.model);
   }
 }
 

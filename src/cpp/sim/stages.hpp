@@ -1,6 +1,7 @@
 // The stages of a step (internal to src/cpp/sim/), in the order step() runs them:
 //
 //   1. kinematics   forwardKinematics        kinematics.cpp   placements, J' v, joint Jacobians
+//                   treeKinematics           tree.cpp         (a robot part: one fused pass)
 //   2. detect       detectContacts           detect.cpp       gaps, the active set, its rows
 //   3. Jacobians    contactJacobians         kinematics.cpp   J, drift J' v, Psi per row
 //   4. Delassus     freeDynamics             dynamics.cpp     M = U D U^T, nle, tau, M^-1 (tau - nle)
@@ -34,6 +35,19 @@ namespace stages {
 /// leaves are J' v) and the world-frame joint Jacobians, per part (sd.parts[s].data).
 void forwardKinematics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                        const Eigen::VectorXd& v);
+/// Stage 1 for a robot part whose joints treeOf describes (tree.cpp), in one pass: oMi, the
+/// world-frame joint Jacobian data.J, and per body in world coordinates its velocity data.ov,
+/// bias acceleration data.oa (q'' = 0), inertia data.oYcrb and rnea's forward-pass force data.of.
+void treeKinematics(const SystemModel& part, SystemWork& w);
+/// After Pinocchio's forwardKinematics and computeJointJacobians (a part treeOf does not
+/// describe): the same world-frame ov, oa, oYcrb and of from its local v, a.
+void worldFrameTerms(const pinocchio::Model& model, pinocchio::Data& data);
+/// oYcrb = oMi Y and of = oY (oa - g) + ov x* (oY ov) per body, from oMi, ov, oa.
+void worldFrameInertias(const pinocchio::Model& model, pinocchio::Data& data);
+/// Stage 4's share of a robot part: M's upper triangle (armature included, as crba) and
+/// nle = C(q, v) v + g(q) from stage 1's world-frame terms, in one backward pass.
+void compositeBackwardPass(const pinocchio::Model& model, pinocchio::Data& data, Eigen::VectorXd& nle);
+
 /// Stage 1 for a free body (SystemModel::free_body) from w.q, w.v: oMi, v and a of its joint, as
 /// Pinocchio's forward kinematics would leave them; no joint Jacobian (data.J is not filled).
 void freeBodyKinematics(const pinocchio::Model& model, SystemWork& w);

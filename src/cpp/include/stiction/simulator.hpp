@@ -129,8 +129,27 @@ struct JointControl {
 /// (a Pinocchio Data holds nv^3 tensors: one Data for 64 free cubes in one Model is 1.9 GB).
 /// Parts interact only through contacts: A = sum over parts of J_s M_s^-1 J_s^T (eq. 22),
 /// block-sparse when the parts are many.
+/// One joint of a robot part as the fused kinematics pass reads it (src/cpp/sim/tree.cpp):
+/// revolute or prismatic about x, y, z (`axis`) or any unit `direction`, or a free flyer.
+struct TreeJoint {
+  enum class Kind { kRevolute, kPrismatic, kFreeFlyer };
+  Kind kind = Kind::kRevolute;
+  int axis = -1;                                         ///< 0, 1, 2: x, y, z; -1: `direction`
+  Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();  ///< the unit axis in the joint's frame
+  int parent = 0, idx_q = 0, idx_v = 0;
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();  ///< jointPlacement
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+  bool rotation_identity = true;
+};
+
+/// The joints of `model` for the fused pass (entry j for joint j; entry 0 unused), or empty when
+/// one is of another kind (planar, spherical, unbounded, ...: Pinocchio's forward kinematics).
+std::vector<TreeJoint> treeOf(const pinocchio::Model& model);
+
 struct SystemModel {
   pinocchio::Model model;
+  /// Its joints for the fused kinematics pass (treeOf); empty: Pinocchio's forwardKinematics.
+  std::vector<TreeJoint> tree;
   std::vector<int> q_index, v_index;  ///< the world coordinate of each local q, v coordinate
   int q_start = -1, v_start = -1;     ///< the first world coordinate when contiguous (else -1)
   /// One free-flyer joint: its mass matrix in its own frame (Pinocchio's LOCAL convention) is
@@ -214,7 +233,6 @@ struct SystemWork {
   std::vector<char> in_support;
   Eigen::MatrixXd U_support;
   Eigen::Matrix3Xd Jrel;  ///< 3 x nv: one contact's relative point Jacobian
-  std::vector<pinocchio::Force> forces;
   bool mass_factored = false;  ///< free body: data.M, U, D hold its constant mass matrix and factor
   /// A free body's D^-1/2 U^-1 (row-major, upper triangular), set with its factor: its W = S J^T.
   std::array<double, 36> free_body_scaling{};

@@ -1,0 +1,142 @@
+"""The fused kinematics pass of a robot part (src/cpp/sim/tree.cpp): placements, the world-frame
+joint Jacobian, velocities and bias accelerations of every joint kind it handles (free flyer,
+revolute and prismatic about x, y, z or a tilted axis, tilted joint placements) in one pass, and
+from them M (armature included) and nle in one backward pass. Checked against Pinocchio's own
+crba, nonLinearEffects, joint Jacobians and forward kinematics on a random tree; a tree with a
+joint the pass does not handle (spherical) takes Pinocchio's pass and must agree as well."""
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from stiction import _core
+from stiction.scene import load_scene
+from stiction.simulator import Simulator
+
+
+def random_tree(rng, with_spherical, armature):
+    """A free-flying base with two branches of three joints of mixed kinds, tilted placements,
+    random inertias; a sphere of radius 0.05 at the end of each branch (frames 'tip0', 'tip1')."""
+    model = pin.Model()
+
+    def placement():
+        return pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-1.0, 1.0, 3)), 0.3 * rng.standard_normal(3))
+
+    def axis():
+        a = rng.standard_normal(3)
+        return a / np.linalg.norm(a)
+
+    base = model.addJoint(0, pin.JointModelFreeFlyer(), placement(), "base")
+    model.appendBodyToJoint(base, pin.Inertia.Random(), pin.SE3.Identity())
+    branches = [
+        [pin.JointModelRX(), pin.JointModelRevoluteUnaligned(axis()), pin.JointModelPZ()],
+        [pin.JointModelRZ(), pin.JointModelPrismaticUnaligned(axis()),
+         pin.JointModelSpherical() if with_spherical else pin.JointModelRY()],
+    ]
+    for b, kinds in enumerate(branches):
+        parent = base
+        for k, joint in enumerate(kinds):
+            parent = model.addJoint(parent, joint, placement(), f"j{b}{k}")
+            model.appendBodyToJoint(parent, pin.Inertia.Random(), pin.SE3.Identity())
+        model.addFrame(pin.Frame(f"tip{b}", parent, placement(), pin.FrameType.OP_FRAME))
+    model.armature[:] = armature
+    return model
+
+
+def classical_acceleration(model, data, frame, point):
+    """The classical acceleration (world axes) of the material point `point` (world) of a frame's
+    body, from Pinocchio's forward kinematics at zero joint acceleration."""
+    joint = model.frames[frame].parentJoint
+    M = data.oMi[joint]
+    r = M.actInv(point)
+    vj, aj = data.v[joint], data.a[joint]
+    v_point = vj.linear + np.cross(vj.angular, r)
+    return M.rotation @ (aj.linear + np.cross(aj.angular, r) + np.cross(vj.angular, v_point))
+
+
+def point_jacobian(model, data, frame, point):
+    joint = model.frames[frame].parentJoint
+    Jj = pin.getJointJacobian(model, data, joint, pin.LOCAL_WORLD_ALIGNED)
+    r = point - data.oMi[joint].translation
+    skew = np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
+    return Jj[:3] - skew @ Jj[3:]
+
+
+@pytest.mark.parametrize("with_spherical", [False, True], ids=["fused", "pinocchio-pass"])
+@pytest.mark.parametrize("armature", [0.0, 0.25])
+def test_random_tree_against_pinocchio(with_spherical, armature):
+    rng = np.random.default_rng(7 + int(with_spherical))
+    model = random_tree(rng, with_spherical, armature)
+    ground = _core.HalfSpace()
+    ground.name, ground.normal, ground.offset = "ground", np.array([0.1, -0.2, 1.0]), -100.0
+    contacts = []
+    for b in range(2):
+        c = _core.SphereContact()
+        c.name, c.frame, c.offset, c.radius = f"tip{b}", model.getFrameId(f"tip{b}"), np.zeros(3), 0.05
+        c.halfspace, c.mu = 0, 0.7
+        contacts.append(c)
+    settings = Simulator(load_scene("solo12-stand")).model.settings
+    settings.activation_distance = 1e3  # both spheres in the problem wherever they are
+    sim = _core.SimulatorModel(model, [ground], contacts, [], settings)
+    data = _core.SimulatorData(sim)
+    for trial in range(3):
+        q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+        v = rng.standard_normal(model.nv)
+        _core.build_contact_problem(sim, data, q, v, 1e-3, 0.5)
+
+        ref = model.createData()
+        M_ref = pin.crba(model, ref, q)
+        M_ref = np.triu(M_ref) + np.triu(M_ref, 1).T
+        nle_ref = pin.nonLinearEffects(model, ref, q, v)
+        assert np.abs(np.asarray(data.M) - M_ref).max() <= 1e-12 * np.abs(M_ref).max()
+        assert np.abs(np.asarray(data.nle) - nle_ref).max() <= 1e-12 * np.abs(nle_ref).max()
+
+        pin.forwardKinematics(model, ref, q, v, np.zeros(model.nv))
+        pin.computeJointJacobians(model, ref, q)
+        pin.updateFramePlacements(model, ref)
+        n = np.asarray(sim.halfspaces[0].normal)
+        T = np.vstack([sim.halfspaces[0].tangent1, sim.halfspaces[0].tangent2, n])
+        J, drift = np.asarray(data.J), np.asarray(data.drift)
+        assert J.shape == (6, model.nv)
+        for b, c in enumerate(contacts):
+            centre = ref.oMf[c.frame].translation
+            point = centre - c.radius * n  # the material point of contact
+            rows = slice(3 * b, 3 * b + 3)
+            expected_J = T @ point_jacobian(model, ref, c.frame, point)
+            np.testing.assert_allclose(J[rows], expected_J, rtol=0, atol=1e-12 * np.abs(expected_J).max())
+            # drift J' v: tangential rows the contact point's, the normal row the centre's
+            acc_point = classical_acceleration(model, ref, c.frame, point)
+            acc_centre = classical_acceleration(model, ref, c.frame, centre)
+            expected = np.array([T[0] @ acc_point, T[1] @ acc_point, n @ acc_centre])
+            np.testing.assert_allclose(drift[rows], expected, rtol=0, atol=1e-11 * max(1.0, np.abs(expected).max()))
+            # the gap: the sphere's lowest point above the plane (n made unit by the model)
+            assert data.gaps[b] == pytest.approx(n @ centre - c.radius - ground.offset, abs=1e-12 * 100)
+
+
+def test_solo_drift_matches_pinocchio_at_a_moving_state():
+    """Solo-12's contact rows' drifts J' v (from the fused pass's world-frame velocities and bias
+    accelerations) against Pinocchio's classical accelerations, joints moved and moving."""
+    sim = Simulator(load_scene("solo12-stand"))
+    sim.rollout(0.02)
+    model = sim.scene.model
+    rng = np.random.default_rng(9)
+    q = np.asarray(sim.data.q).copy()
+    q[7:] += 0.02 * rng.standard_normal(model.nq - 7)
+    v = 0.5 * rng.standard_normal(model.nv)
+    _core.build_contact_problem(sim.model, sim.data, q, v, 1e-3, 0.5)
+    ref = model.createData()
+    pin.forwardKinematics(model, ref, q, v, np.zeros(model.nv))
+    pin.updateFramePlacements(model, ref)
+    drift = np.asarray(sim.data.drift)
+    row = 0
+    for i in sim.data.active:
+        c = sim.scene.contacts[i]
+        h = sim.model.halfspaces[c.halfspace]
+        n = np.asarray(h.normal)
+        centre = ref.oMf[c.frame].act(np.asarray(c.offset))
+        point = centre - c.radius * n
+        acc_point = classical_acceleration(model, ref, c.frame, point)
+        expected = np.array([h.tangent1 @ acc_point, h.tangent2 @ acc_point,
+                             n @ classical_acceleration(model, ref, c.frame, centre)])
+        np.testing.assert_allclose(drift[row:row + 3], expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+        row += 3
+    assert row == 12
