@@ -140,3 +140,70 @@ def test_solo_drift_matches_pinocchio_at_a_moving_state():
         np.testing.assert_allclose(drift[row:row + 3], expected, rtol=0, atol=1e-12 * np.abs(expected).max())
         row += 3
     assert row == 12
+
+
+ROBOT_OPERATOR = r"""
+import sys
+import numpy as np, pinocchio as pin
+from stiction import _core
+from stiction.scene import load_scene
+from stiction.simulator import Simulator
+sys.path.insert(0, sys.argv[2])
+from test_tree_kinematics import random_tree
+out = {}
+# Solo-12 and TALOS (its arms out of every chain), moving
+for name in ("solo12-stand", "talos-stand"):
+    sim = Simulator(load_scene(name))
+    sim.rollout(0.01)
+    rng = np.random.default_rng(4)
+    v = 0.3 * rng.standard_normal(sim.model.nv)
+    _core.build_contact_problem(sim.model, sim.data, np.asarray(sim.data.q), v, 1e-3, 0.5)
+    out[name] = (np.asarray(sim.data.J), np.asarray(sim.data.A), np.asarray(sim.data.M))
+# a random tree: tip0 on the ground (its chain: base and branch 0), tip1 against a half-space carried
+# by tip0's body (rows between two limbs: not one root path, so the general operator)
+rng = np.random.default_rng(12)
+model = random_tree(rng, False, 0.0)
+ground = _core.HalfSpace()
+ground.name, ground.normal, ground.offset = "ground", np.array([0.0, 0.0, 1.0]), -100.0
+wall = _core.HalfSpace()
+wall.name, wall.normal, wall.offset, wall.frame = "wall", np.array([0.3, 1.0, 0.2]), -100.0, model.getFrameId("tip0")
+contacts = []
+for b, h in ((0, 0), (1, 1)):
+    c = _core.SphereContact()
+    c.name, c.frame, c.offset, c.radius, c.halfspace, c.mu = f"tip{b}", model.getFrameId(f"tip{b}"), np.zeros(3), 0.05, h, 0.5
+    contacts.append(c)
+settings = Simulator(load_scene("solo12-stand")).model.settings
+settings.activation_distance = 1e3
+for tag, halfspaces, cs in (("tree", [ground], [contacts[0]]), ("two-limbs", [ground, wall], contacts)):
+    sim = _core.SimulatorModel(model, halfspaces, cs, [], settings)
+    data = _core.SimulatorData(sim)
+    q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+    _core.build_contact_problem(sim, data, q, rng.standard_normal(model.nv), 1e-3, 0.5)
+    out[tag] = (np.asarray(data.J), np.asarray(data.A), np.asarray(data.M))
+np.savez(sys.argv[1], **{f"{k}_{i}": a for k, v in out.items() for i, a in enumerate(v)})
+"""
+
+
+@pytest.mark.parametrize("kernels", ["0", "1"])
+def test_robot_operator_by_chains(tmp_path, kernels):
+    """A robot that is the whole problem gets A = J M^-1 J^T from its tree's chains (each contact's
+    root path; two contacts share their common ancestor's): equal to J M^-1 J^T of the step's own J
+    and M, exactly symmetric, with the AVX2 kernel and with the portable loops; a contact between
+    two of the robot's limbs (not one root path) takes the general operator."""
+    import os
+    import pathlib
+    import subprocess
+    import sys
+
+    out = tmp_path / "ops.npz"
+    env = dict(os.environ, STICTION_VECTOR_KERNELS=kernels)
+    run = subprocess.run([sys.executable, "-c", ROBOT_OPERATOR, str(out), str(pathlib.Path(__file__).parent)],
+                         capture_output=True, text=True, env=env)
+    assert run.returncode == 0, run.stderr
+    saved = np.load(out)
+    for tag in ("solo12-stand", "talos-stand", "tree", "two-limbs"):
+        J, A, M = saved[f"{tag}_0"], saved[f"{tag}_1"], saved[f"{tag}_2"]
+        reference = J @ np.linalg.solve(M, J.T)
+        assert A.shape == reference.shape and A.shape[0] >= 3
+        np.testing.assert_array_equal(A, A.T)
+        np.testing.assert_allclose(A, reference, rtol=0, atol=1e-12 * np.abs(reference).max())

@@ -486,6 +486,13 @@ bool samePartRows(const SimulatorData& sd) {
 
 void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
   const Eigen::Index rows = sd.rows;
+  if (wholeWorldPart(sim, sd) && !sim.systems[0].free_body && robotOperator(sim, sd)) {
+    // one robot, each contact on one root path: A by the tree's chains (robot_delassus.cpp)
+    sd.sparse = false;
+    sd.a_in_operator = false;
+    if (sd.A_sparse.rows() != 0) sd.A_sparse.resize(0, 0);
+    return;
+  }
   const Eigen::Index entries = delassusFactors(sd);
   // Sparse when the parts leave most of A empty: many parts, more rows than the dense
   // solvers handle well (the default rule's threshold), at most 25 % of the entries (a tower's

@@ -71,6 +71,11 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
 /// symmetric by construction; dense, or sparse (sd.sparse) when many parts share > 96 rows.
 void delassusOperator(const SimulatorModel& sim, SimulatorData& sd);
 
+/// 4b for a problem that is one robot's alone (robot_delassus.cpp): sd.A = J M^-1 J^T from the
+/// chains of the tree, exactly symmetric. False (nothing done) when some block's columns are not
+/// on one root path (a contact between two of the robot's limbs): the general path then.
+bool robotOperator(const SimulatorModel& sim, SimulatorData& sd);
+
 /// 4c. b of eq. 27 with Phi = nle - tau: J M^-1 Phi - J' v - (2 zeta / delta) J v - Psi / delta^2;
 /// without the J' v term on tangential rows when tangential_drift is false (time stepping).
 void rightHandSide(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v, double delta,

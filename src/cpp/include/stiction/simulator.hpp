@@ -214,6 +214,24 @@ struct AssemblyBlock {
 /// The target a plan of A's blocks (SimulatorData::assembly) writes: none, A_sparse's values, or A.
 enum class AssemblyKind { kNone, kSparse, kDense };
 
+/// The robot Delassus operator's workspace (src/cpp/sim/robot_delassus.cpp): the problem's blocks
+/// of rows, each block's chain (the root path of its deepest coordinate) and its columns of
+/// Y = D^-1/2 U^-1 J^T on that chain.
+struct RobotOperatorPlan {
+  struct Block {
+    int row = 0, k = 0;          ///< first row, rows (1-3)
+    int start = 0, length = 0;   ///< its chain: chain[start, start + length)
+  };
+  std::vector<Block> blocks;
+  std::vector<int> chain;       ///< every block's chain (ascending coordinates), one after another
+  std::vector<int> prefix;      ///< blocks x blocks (f <= g): the length of their common chain
+  std::vector<double> scale;    ///< sqrt(D^-1) per coordinate
+  std::vector<double> Y;        ///< 4 values per chain entry: the block's values, zero-padded
+  bool valid = false;           ///< the plan holds for these active contacts and anchors:
+  std::vector<int> active;
+  std::size_t anchors = 0;
+};
+
 struct SystemWork {
   explicit SystemWork(const SystemModel& s);
 
@@ -233,6 +251,7 @@ struct SystemWork {
   std::vector<char> in_support;
   Eigen::MatrixXd U_support;
   Eigen::Matrix3Xd Jrel;  ///< 3 x nv: one contact's relative point Jacobian
+  RobotOperatorPlan robot_plan;
   bool mass_factored = false;  ///< free body: data.M, U, D hold its constant mass matrix and factor
   /// A free body's D^-1/2 U^-1 (row-major, upper triangular), set with its factor: its W = S J^T.
   std::array<double, 36> free_body_scaling{};
