@@ -5,6 +5,7 @@
 #include <limits>
 #include <vector>
 
+#include "stiction/clock.hpp"
 #include "stiction/cone.hpp"
 #include "stiction/verdict.hpp"
 
@@ -204,7 +205,7 @@ double AdmmSolver::largestEigenvalueEstimate(const ContactProblem& problem, int 
 int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max_iterations,
                     double tolerance, double time_limit, double initial_rho, bool resume,
                     std::string& message, double switch_after) {
-  using Clock = std::chrono::steady_clock;
+  using Clock = FastClock;  // the time-stamp counter (clock.hpp)
   const auto start = Clock::now();
   const Eigen::Index m = problem.numRows();
   const double scale = stoppingScale(problem);

@@ -6,6 +6,7 @@
 #include <limits>
 #include <utility>
 
+#include "stiction/clock.hpp"
 #include "stiction/admm.hpp"
 #include "stiction/cone.hpp"
 #include "stiction/proxqp_warm_start.hpp"
@@ -534,7 +535,7 @@ void NewtonSolver::fillSparseJacobian(const ContactProblem& problem) {
 
 int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max_steps,
                       double tolerance, double time_limit, std::string& message) {
-  using Clock = std::chrono::steady_clock;
+  using Clock = FastClock;  // the time-stamp counter (clock.hpp)
   const auto start = Clock::now();
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
@@ -821,7 +822,7 @@ bool DefaultSolver::heldFactorFits(const ContactProblem& problem) const {
 
 void DefaultSolver::iterate(const ContactProblem& problem, const SolverSettings& settings,
                             SolverResult& result) {
-  using Clock = std::chrono::steady_clock;
+  using Clock = FastClock;  // the time-stamp counter (clock.hpp)
   const auto start = Clock::now();
   auto seconds_since = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
   // Every stage gets what is left of the time limit (0 = none).

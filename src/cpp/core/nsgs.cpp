@@ -7,6 +7,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
 
+#include "stiction/clock.hpp"
 #include "stiction/cone.hpp"
 #include "stiction/local_solve.hpp"
 #include "stiction/verdict.hpp"
@@ -92,7 +93,7 @@ void NsgsSolver::prepare(const ContactProblem& problem) {
 
 int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int max_sweeps,
                       double tolerance, double switch_after, double time_limit, std::string& message) {
-  using Clock = std::chrono::steady_clock;
+  using Clock = FastClock;  // the time-stamp counter (clock.hpp)
   const auto start = Clock::now();
   prepare(problem);
   const auto& cons = problem.constraints();

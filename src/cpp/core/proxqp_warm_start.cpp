@@ -1,4 +1,5 @@
 #include "stiction/proxqp_warm_start.hpp"
+#include "stiction/clock.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -11,7 +12,7 @@ namespace stiction {
 StageReport proxqpWarmStart(const ContactProblem& problem, const SolverSettings& settings, double time_limit,
                             Eigen::VectorXd& lam, Eigen::VectorXd* ray) {
   namespace pq = proxsuite::proxqp;
-  using Clock = std::chrono::steady_clock;
+  using Clock = FastClock;  // the time-stamp counter (clock.hpp)
   const auto start = Clock::now();
   auto elapsed = [&]() { return std::chrono::duration<double>(Clock::now() - start).count(); };
   StageReport report;

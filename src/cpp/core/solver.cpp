@@ -5,6 +5,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "stiction/clock.hpp"
 #include "stiction/admm.hpp"
 #include "stiction/cone.hpp"
 #include "stiction/newton.hpp"
@@ -110,7 +111,7 @@ bool startsWith(const std::string& s, const char* prefix) { return s.rfind(prefi
 
 void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSettings& settings,
            SolverResult& result, const Eigen::VectorXd* guess) {
-  using Clock = std::chrono::steady_clock;
+  using Clock = FastClock;  // the time-stamp counter (clock.hpp)
   if (!(settings.tolerance > 0.0) || !std::isfinite(settings.tolerance))
     throw std::invalid_argument("solver tolerance must be a positive finite number, got " + fmt(settings.tolerance));
   if (settings.max_iterations < 0)

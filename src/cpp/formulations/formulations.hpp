@@ -7,6 +7,7 @@
 #include <memory>
 #include <string>
 
+#include "stiction/clock.hpp"
 #include "stiction/formulation.hpp"
 
 namespace stiction {
@@ -24,7 +25,7 @@ std::unique_ptr<Formulation> makePinocchioFormulation(const std::string& method,
 template <class Sweep, class Residual>
 void sweepUntilConverged(const SolverSettings& settings, SolverResult& result, Sweep sweep, Residual residual,
                          const char* nonfinite_message) {
-  using Clock = std::chrono::steady_clock;
+  using Clock = FastClock;  // the time-stamp counter (clock.hpp)
   const auto start = Clock::now();
   result.message = "iteration limit reached";
   int done = 0;

@@ -29,6 +29,7 @@
 
 #include <proxsuite/proxqp/dense/dense.hpp>
 
+#include "stiction/clock.hpp"
 #include "stiction/cone.hpp"
 #include "stiction/verdict.hpp"
 
@@ -92,7 +93,7 @@ class PyramidFormulation final : public Formulation {
 
   void iterate(const ContactProblem& problem, const SolverSettings& settings, SolverResult& result) override {
     namespace pq = proxsuite::proxqp;
-    using Clock = std::chrono::steady_clock;
+    using Clock = FastClock;  // the time-stamp counter (clock.hpp)
     const auto start = Clock::now();
     const auto& cons = problem.constraints();
     const auto& off = problem.offsets();

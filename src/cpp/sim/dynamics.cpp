@@ -107,8 +107,11 @@ void factorMass(const SystemModel& part, SystemWork& w, const JointControl& cont
       w.data.M(k, k) += h * control.kd[world] + h * h * control.kp[world];
     }
   }
-  // M = U D U^T by Pinocchio's tree-sparse Cholesky (cheaper than a dense LLT).
-  pinocchio::cholesky::decompose(model, w.data);
+  // M = U D U^T by Pinocchio's tree-sparse Cholesky (cheaper than a dense LLT)
+  if (part.free_body)
+    pinocchio::cholesky::decompose(model, w.data);
+  else
+    treeDecompose(w.data);
   if (model.nv > 0 && !(w.data.D.minCoeff() > 0.0))
     throw std::runtime_error("the mass matrix of '" + model.name + "' is not positive definite at this configuration");
 }

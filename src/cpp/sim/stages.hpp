@@ -24,6 +24,7 @@
 
 #include <chrono>
 
+#include "stiction/clock.hpp"
 #include "stiction/simulator.hpp"
 
 namespace stiction {
@@ -42,11 +43,12 @@ void treeKinematics(const SystemModel& part, SystemWork& w);
 /// After Pinocchio's forwardKinematics and computeJointJacobians (a part treeOf does not
 /// describe): the same world-frame ov, oa, oYcrb and of from its local v, a.
 void worldFrameTerms(const pinocchio::Model& model, pinocchio::Data& data);
-/// oYcrb = oMi Y and of = oY (oa - g) + ov x* (oY ov) per body, from oMi, ov, oa.
-void worldFrameInertias(const pinocchio::Model& model, pinocchio::Data& data);
 /// Stage 4's share of a robot part: M's upper triangle (armature included, as crba) and
 /// nle = C(q, v) v + g(q) from stage 1's world-frame terms, in one backward pass.
 void compositeBackwardPass(const pinocchio::Model& model, pinocchio::Data& data, Eigen::VectorXd& nle);
+/// M = U D U^T as Pinocchio's cholesky::decompose (its tree-sparse factor, the same operations),
+/// written for this processor's store forwarding (tree.cpp).
+void treeDecompose(pinocchio::Data& data);
 
 /// Stage 1 for a free body (SystemModel::free_body) from w.q, w.v: oMi, v and a of its joint, as
 /// Pinocchio's forward kinematics would leave them; no joint Jacobian (data.J is not filled).
@@ -164,7 +166,7 @@ void solveJacobianTransposed(const SimulatorModel& sim, SimulatorData& sd, const
 
 // ---- timing
 
-using Clock = std::chrono::steady_clock;
+using Clock = FastClock;  // the time-stamp counter (clock.hpp)
 
 inline double microseconds(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::micro>(b - a).count();
