@@ -143,8 +143,50 @@ void chainOperatorPortable(const pinocchio::Data& data, const SystemWork& w, Rob
 }
 
 #ifdef STICTION_X86_KERNELS
-// The same with AVX2 and FMA, one chain entry per register (raw pointers and intrinsics only:
-// docs/development.md, "No -march=native"). Returns whether every value of A is finite.
+// A block's k values of J's column, zeros past them (read as 2 + 1: J ends somewhere).
+__attribute__((target("avx2,fma"))) inline __m256d loadBlock(const double* j, int k) {
+  const __m128d lo = k > 1 ? _mm_loadu_pd(j) : _mm_load_sd(j);
+  const __m128d hi = k > 2 ? _mm_load_sd(j + 2) : _mm_setzero_pd();
+  return _mm256_set_m128d(hi, lo);
+}
+
+// U y = j on a chain of L entries, held in registers (L a constant: the loops unroll), right-looking:
+// once y_a is final its share leaves every entry above it, independent multiply-adds. Stored scaled.
+template <int L>
+__attribute__((target("avx2,fma"))) void chainSolveAvx2(const double* J, long n, const double* U, long nu,
+                                                        const double* scale, const int* ch, int row, int k,
+                                                        double* y) {
+  __m256d Y[L];
+#pragma GCC unroll 16
+  for (int a = 0; a < L; ++a) Y[a] = loadBlock(J + ch[a] * n + row, k);
+#pragma GCC unroll 16
+  for (int a = L - 1; a > 0; --a) {
+    const double* Ucol = U + ch[a] * nu;  // U(., ch[a])
+#pragma GCC unroll 16
+    for (int e = 0; e < a; ++e) Y[e] = _mm256_fnmadd_pd(_mm256_broadcast_sd(Ucol + ch[e]), Y[a], Y[e]);
+  }
+#pragma GCC unroll 16
+  for (int a = 0; a < L; ++a) _mm256_storeu_pd(y + 4 * a, _mm256_mul_pd(Y[a], _mm256_broadcast_sd(scale + ch[a])));
+}
+
+// The same for a longer chain, through memory.
+__attribute__((target("avx2,fma"))) void chainSolveAvx2(const double* J, long n, const double* U, long nu,
+                                                        const double* scale, const int* ch, int length, int row,
+                                                        int k, double* y) {
+  for (int a = 0; a < length; ++a) _mm256_storeu_pd(y + 4 * a, loadBlock(J + ch[a] * n + row, k));
+  for (int a = length - 1; a > 0; --a) {
+    const __m256d ya = _mm256_loadu_pd(y + 4 * a);
+    const double* Ucol = U + ch[a] * nu;
+    for (int e = 0; e < a; ++e)
+      _mm256_storeu_pd(y + 4 * e, _mm256_fnmadd_pd(_mm256_broadcast_sd(Ucol + ch[e]), ya, _mm256_loadu_pd(y + 4 * e)));
+  }
+  for (int a = 0; a < length; ++a)
+    _mm256_storeu_pd(y + 4 * a, _mm256_mul_pd(_mm256_loadu_pd(y + 4 * a), _mm256_broadcast_sd(scale + ch[a])));
+}
+
+// The same as chainOperatorPortable with AVX2 and FMA, one chain entry per register (raw pointers
+// and intrinsics only: docs/development.md, "No -march=native"). Returns whether every value of A
+// is finite.
 __attribute__((target("avx2,fma"))) bool chainOperatorAvx2(const double* J, long n, const double* U, long nu,
                                                             const double* scale, const RobotOperatorPlan::Block* blocks,
                                                             long count, const int* chain, const int* prefix, double* Y,
@@ -153,27 +195,15 @@ __attribute__((target("avx2,fma"))) bool chainOperatorAvx2(const double* J, long
     const RobotOperatorPlan::Block& b = blocks[f];
     const int* ch = chain + b.start;
     double* y = Y + 4 * b.start;
-    for (int a = 0; a < b.length; ++a) {
-      // the block's k values of J's column, zeros past them (read as 2 + 1: J ends somewhere)
-      const double* j = J + ch[a] * n + b.row;
-      const __m128d lo = b.k > 1 ? _mm_loadu_pd(j) : _mm_load_sd(j);
-      const __m128d hi = b.k > 2 ? _mm_load_sd(j + 2) : _mm_setzero_pd();
-      _mm256_storeu_pd(y + 4 * a, _mm256_set_m128d(hi, lo));
-    }
-    // U y = j, right-looking: the updates of different entries are independent (a left-looking
-    // sum per entry was one chain of dependent multiply-adds, most of this kernel's time)
-    for (int a = b.length - 1; a > 0; --a) {
-      const __m256d ya = _mm256_loadu_pd(y + 4 * a);
-      const double* Ucol = U + ch[a] * nu;  // U(., ch[a])
-      for (int e = 0; e < a; ++e)
-        _mm256_storeu_pd(y + 4 * e, _mm256_fnmadd_pd(_mm256_broadcast_sd(Ucol + ch[e]), ya, _mm256_loadu_pd(y + 4 * e)));
-    }
-  }
-  for (long f = 0; f < count; ++f) {
-    const RobotOperatorPlan::Block& b = blocks[f];
-    for (int a = 0; a < b.length; ++a) {
-      double* y = Y + 4 * (b.start + a);
-      _mm256_storeu_pd(y, _mm256_mul_pd(_mm256_loadu_pd(y), _mm256_broadcast_sd(scale + chain[b.start + a])));
+    switch (b.length) {  // (a legged robot's foot: 9 to 12; an arm's tool: 6 or 7)
+#define STICTION_CHAIN(L) \
+  case L: chainSolveAvx2<L>(J, n, U, nu, scale, ch, b.row, b.k, y); break;
+      STICTION_CHAIN(1) STICTION_CHAIN(2) STICTION_CHAIN(3) STICTION_CHAIN(4) STICTION_CHAIN(5) STICTION_CHAIN(6)
+      STICTION_CHAIN(7) STICTION_CHAIN(8) STICTION_CHAIN(9) STICTION_CHAIN(10) STICTION_CHAIN(11) STICTION_CHAIN(12)
+      STICTION_CHAIN(13) STICTION_CHAIN(14)
+#undef STICTION_CHAIN
+      case 0: break;
+      default: chainSolveAvx2(J, n, U, nu, scale, ch, b.length, b.row, b.k, y);
     }
   }
   __m256d finite = _mm256_setzero_pd();
