@@ -133,6 +133,8 @@ class DefaultSolver final : public ContactSolver {
   /// refinement solves it takes at most.
   static constexpr double kStickShift = 1e-10;
   static constexpr int kStickSolves = 4;
+  /// Up to this many rows the dense factor's solves are plain substitutions (solveShifted).
+  static constexpr Eigen::Index kStickSmallRows = 48;
   /// A dense A with at most this fraction of nonzeros is factored sparsely by the sticking step
   /// (a tower's A: block-tridiagonal).
   static constexpr double kStickSparseDensity = 0.25;
