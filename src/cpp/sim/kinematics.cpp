@@ -90,17 +90,24 @@ inline void addFreeBodyPointJacobian(const Eigen::Matrix3d& R, const Eigen::Vect
   Jrel.rightCols<3>().noalias() -= sign * (skew * R);
 }
 
-// Jrel += sign x the world velocity Jacobian of the material point r (in joint j's frame) of a robot
-// part: from the world-frame joint Jacobian of forwardKinematics (computeJointJacobians), a column
-// (v_o, omega) moves the point p = oMi r at v_o + omega x p. Only the columns of j and its
-// ancestors (Pinocchio's parents_fromRow) are nonzero. (Pinocchio's getFrameJacobian built the
-// whole 6 x nv frame Jacobian first: ~1.8k instructions a contact on Solo-12.)
-void addPointJacobian(const pinocchio::Model& m, SystemWork& w, pinocchio::JointIndex j, const Eigen::Vector3d& r,
-                      double sign) {
+// Rows [lr, lr + k) of a robot part's J += sign T (rows 0..k-1) times the world velocity Jacobian of
+// the material point r (in joint j's frame): from the world-frame joint Jacobian of stage 1, a
+// column (v_o, omega) moves the point p = oMi r at v_o + omega x p. Only the columns of j and its
+// ancestors (Pinocchio's parents_fromRow) are nonzero. Written into J entry by entry: a 3 x nv
+// point Jacobian first, then T times it, read the point Jacobian's columns back two values at a
+// time right after writing them (loads spanning two stores), and multiplied its zero columns too.
+void addPointRows(const pinocchio::Model& m, SystemWork& w, pinocchio::JointIndex j, const Eigen::Vector3d& r,
+                  const Eigen::Matrix3d& T, int k, int lr, double sign) {
   const Eigen::Vector3d p = w.data.oMi[j].act(r);
-  for (int k = m.idx_vs[j] + m.nvs[j] - 1; k >= 0; k = w.data.parents_fromRow[k]) {
-    const auto column = w.data.J.col(k);
-    w.Jrel.col(k) += sign * (column.head<3>() + column.tail<3>().cross(p));
+  const double px = p.x(), py = p.y(), pz = p.z();
+  const Eigen::Index n = w.J.rows();
+  double* J = w.J.data();
+  for (int c = m.idx_vs[j] + m.nvs[j] - 1; c >= 0; c = w.data.parents_fromRow[static_cast<std::size_t>(c)]) {
+    const double* col = w.data.J.col(c).data();  // (v_o, omega)
+    const double ux = col[0] + col[4] * pz - col[5] * py;
+    const double uy = col[1] + col[5] * px - col[3] * pz;
+    const double uz = col[2] + col[3] * py - col[4] * px;
+    for (int q = 0; q < k; ++q) J[c * n + lr + q] += sign * (T(q, 0) * ux + T(q, 1) * uy + T(q, 2) * uz);
   }
 }
 
@@ -139,12 +146,11 @@ void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& 
       local_rows[p] = lr;
       continue;
     }
-    w.Jrel.setZero();
-    if (partOf(sim, b.plus) == s) addPointJacobian(m, w, sim.joint_local[b.plus], at_plus, 1.0);
-    if (partOf(sim, b.minus) == s) addPointJacobian(m, w, sim.joint_local[b.minus], at_minus, -1.0);
     const int lr = sd.part_fill[s];
     sd.part_fill[s] += k;
-    for (int r = 0; r < k; ++r) w.J.row(lr + r).noalias() = T.row(r) * w.Jrel;
+    for (int r = 0; r < k; ++r) w.J.row(lr + r).setZero();
+    if (partOf(sim, b.plus) == s) addPointRows(m, w, sim.joint_local[b.plus], at_plus, T, k, lr, 1.0);
+    if (partOf(sim, b.minus) == s) addPointRows(m, w, sim.joint_local[b.minus], at_minus, T, k, lr, -1.0);
     local_rows[p] = lr;
   }
 }

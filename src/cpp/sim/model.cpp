@@ -184,8 +184,7 @@ SystemWork::SystemWork(const SystemModel& s)
       tau(Eigen::VectorXd::Zero(s.model.nv)),
       nle(Eigen::VectorXd::Zero(s.model.nv)),
       v_free(Eigen::VectorXd::Zero(s.model.nv)),
-      x(Eigen::VectorXd::Zero(s.model.nv)),
-      Jrel(Eigen::Matrix3Xd::Zero(3, s.model.nv)) {}
+      x(Eigen::VectorXd::Zero(s.model.nv)) {}
 
 SimulatorData::SimulatorData(const SimulatorModel& sim)
     : q(pinocchio::neutral(sim.model)),

@@ -250,7 +250,6 @@ struct SystemWork {
   std::vector<int> support;
   std::vector<char> in_support;
   Eigen::MatrixXd U_support;
-  Eigen::Matrix3Xd Jrel;  ///< 3 x nv: one contact's relative point Jacobian
   RobotOperatorPlan robot_plan;
   bool mass_factored = false;  ///< free body: data.M, U, D hold its constant mass matrix and factor
   /// A free body's D^-1/2 U^-1 (row-major, upper triangular), set with its factor: its W = S J^T.
