@@ -15,6 +15,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
@@ -292,10 +295,22 @@ void compositeBackwardPass(const pinocchio::Model& model, pinocchio::Data& data,
     for (int k = iv; k < iv + nv_i; ++k) {
       const Spatial column = load6(J + 6 * k);
       const Spatial F = Y * column;
+#ifdef __SSE2__
+      // J's columns were written long before (stage 1): read two values at a time
+      const __m128d f01 = _mm_set_pd(F.linear.y, F.linear.x), f23 = _mm_set_pd(F.angular.x, F.linear.z),
+                    f45 = _mm_set_pd(F.angular.z, F.angular.y);
+      for (int j = k; j >= 0; j = data.parents_fromRow[static_cast<std::size_t>(j)]) {
+        const double* cj = J + 6 * j;
+        const __m128d sum = _mm_add_pd(_mm_add_pd(_mm_mul_pd(_mm_loadu_pd(cj), f01), _mm_mul_pd(_mm_loadu_pd(cj + 2), f23)),
+                                       _mm_mul_pd(_mm_loadu_pd(cj + 4), f45));
+        M[k * nv + j] = _mm_cvtsd_f64(_mm_add_sd(sum, _mm_unpackhi_pd(sum, sum)));
+      }
+#else
       for (int j = k; j >= 0; j = data.parents_fromRow[static_cast<std::size_t>(j)]) {
         const Spatial cj = load6(J + 6 * j);
         M[k * nv + j] = dot(cj.linear, F.linear) + dot(cj.angular, F.angular);
       }
+#endif
       M[k * nv + k] += model.armature[k];
       nle[k] = dot(column.linear, f.linear) + dot(column.angular, f.angular);
     }
