@@ -98,3 +98,22 @@ def test_threads_solving_at_once_get_the_same_answers():
     for t in threads:
         t.join()
     assert len(results) == 90 and all(np.array_equal(r, expected) for r in results)
+
+
+def test_a_rollout_records_into_the_arrays_it_returns():
+    """A rollout's arrays are views of one block it recorded into (no copy): every field, every
+    record_every, the last record the simulator's own state, and each rollout its own memory."""
+    sim = Simulator("solo12-stand")
+    every = _core.rollout(sim.model, sim.data, 40, 1)
+    q_end, v_end, t_end = np.array(sim.data.q), np.array(sim.data.v), sim.data.t
+    sim2 = Simulator("solo12-stand")
+    sparse = _core.rollout(sim2.model, sim2.data, 40, 7)
+    assert sparse["q"].shape == (40 // 7 + 1, sim.model.nq) and sparse["timings"].shape == (6, 5)
+    for key in ("t", "q", "v", "lam", "contact_velocity", "gaps", "states", "rows", "residual", "iterations",
+                "converged", "dt"):
+        assert np.array_equal(sparse[key], every[key][::7]), key
+        assert np.isfinite(every[key]).all(), key
+    assert np.array_equal(every["q"][-1], q_end) and np.array_equal(every["v"][-1], v_end) and every["t"][-1] == t_end
+    again = _core.rollout(sim.model, sim.data, 3, 1)
+    again["q"][:] = 0.0  # its own memory: the first recording is untouched
+    assert np.array_equal(every["q"][-1], q_end)

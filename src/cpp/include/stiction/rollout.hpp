@@ -12,24 +12,52 @@
 
 namespace stiction {
 
-/// Every `every`-th state of a rollout (and the first), row per record.
+/// Every `every`-th state of a rollout (and the first), row per record. The arrays are views of
+/// one block of doubles: its own, or one the caller lays them out in (allocate), such as the
+/// memory of the arrays Python receives, so a recording is written once and never copied.
 struct Recording {
   /// One row per record: a step's values are contiguous (column-major, each record's values lay
   /// a column's length apart: on a 256-contact tower's 2000-step rollout, writing them was 12 % of
   /// the rollout).
   using Rows = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-  Eigen::VectorXd t, residual, iterations, converged, dt;
-  Rows q, v, lam, contact_velocity, gaps, states, rows, anchor_lam, timings;
+  Eigen::Map<Eigen::VectorXd> t{nullptr, 0}, residual{nullptr, 0}, iterations{nullptr, 0}, converged{nullptr, 0},
+      dt{nullptr, 0};
+  Eigen::Map<Rows> q{nullptr, 0, 0}, v{nullptr, 0, 0}, lam{nullptr, 0, 0}, contact_velocity{nullptr, 0, 0},
+      gaps{nullptr, 0, 0}, states{nullptr, 0, 0}, rows{nullptr, 0, 0}, anchor_lam{nullptr, 0, 0},
+      timings{nullptr, 0, 0};
   int records = 0;       ///< rows filled (fewer than allocated when the rollout stopped early)
   std::string error;     ///< why it stopped early (the step's exception), empty when it ran to the end
 
-  /// Sizes the arrays for n_steps / every + 1 records of `sim`, filled with NaN.
-  void allocate(const SimulatorModel& sim, int n_steps, int every);
+  Recording() = default;
+  Recording(Recording&&) = default;  // (the views keep pointing at the same block)
+  Recording& operator=(Recording&&) = default;
+  Recording(const Recording&) = delete;
+  Recording& operator=(const Recording&) = delete;
+
+  /// The doubles n_steps / every + 1 records of `sim` take, every array in one block.
+  static std::size_t size(const SimulatorModel& sim, int n_steps, int every);
+  /// Lays the arrays out for n_steps / every + 1 records of `sim`, filled with NaN: in `storage`
+  /// (size() doubles), or when it is null in a block of its own.
+  void allocate(const SimulatorModel& sim, int n_steps, int every, double* storage = nullptr);
+  /// True when the arrays are laid out for these counts (allocate need not run again).
+  bool fits(const SimulatorModel& sim, int n_steps, int every) const;
+  /// The arrays in the block's order, each with its offset (in doubles) and columns (-1: a vector).
+  struct Field {
+    const char* name;
+    std::size_t offset;
+    Eigen::Index cols;
+  };
+  std::vector<Field> fields() const;
+  const double* block() const { return t.data(); }
   void record(const SimulatorModel& sim, const SimulatorData& d);
+
+ private:
+  std::vector<double> own_;
 };
 
-/// n_steps of `d` from its current state, recording every `every`-th. Throws std::invalid_argument
-/// for bad counts; a step that throws propagates (the recording keeps what came before it).
+/// n_steps of `d` from its current state, recording every `every`-th (into `out` as laid out by
+/// allocate for these counts, else allocated here). Throws std::invalid_argument for bad counts; a
+/// step that throws propagates (the recording keeps what came before it).
 void rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out);
 
 /// One simulation of a batch: its model, its data (state in, state out) and what it records.
