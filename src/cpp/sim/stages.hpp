@@ -63,8 +63,9 @@ void detectContacts(const SimulatorModel& sim, SimulatorData& sd);
 /// drift J' v, position_error Psi (gap on normal rows, anchor error), tangent_row.
 void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v);
 
-/// 4a. M (crba; h kd + h^2 kp on its diagonal when implicit_pd_step = h > 0), its factor
-/// M = U D U^T per part, nle, the control torque tau and v_free = M^-1 (tau - nle).
+/// 4a. M and nle (a robot's from stage 1's world-frame terms, compositeBackwardPass; a free
+/// body's M by crba, once), h kd + h^2 kp on M's diagonal when implicit_pd_step = h > 0, its
+/// factor M = U D U^T per part, the control torque tau and v_free = M^-1 (tau - nle).
 /// Throws when M is not positive definite.
 void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                   const Eigen::VectorXd& v, double implicit_pd_step);
