@@ -62,6 +62,4 @@ FastClock::time_point FastClock::now() noexcept {
   return time_point(std::chrono::duration_cast<duration>(std::chrono::steady_clock::now().time_since_epoch()));
 }
 
-bool FastClock::usesTimeStampCounter() noexcept { return counterRate().usable; }
-
 }  // namespace stiction

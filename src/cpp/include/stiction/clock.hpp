@@ -18,8 +18,6 @@ struct FastClock {
   using time_point = std::chrono::time_point<FastClock>;
   static constexpr bool is_steady = true;
   static time_point now() noexcept;
-  /// True when now() reads the time-stamp counter (false: steady_clock).
-  static bool usesTimeStampCounter() noexcept;
 };
 
 }  // namespace stiction
