@@ -11,6 +11,7 @@ import pytest
 from stiction import _core
 from stiction.scene import load_scene
 from stiction.simulator import Simulator
+from test_world_parts import point_acceleration, point_jacobian
 
 
 def random_tree(rng, with_spherical, armature):
@@ -40,25 +41,6 @@ def random_tree(rng, with_spherical, armature):
         model.addFrame(pin.Frame(f"tip{b}", parent, placement(), pin.FrameType.OP_FRAME))
     model.armature[:] = armature
     return model
-
-
-def classical_acceleration(model, data, frame, point):
-    """The classical acceleration (world axes) of the material point `point` (world) of a frame's
-    body, from Pinocchio's forward kinematics at zero joint acceleration."""
-    joint = model.frames[frame].parentJoint
-    M = data.oMi[joint]
-    r = M.actInv(point)
-    vj, aj = data.v[joint], data.a[joint]
-    v_point = vj.linear + np.cross(vj.angular, r)
-    return M.rotation @ (aj.linear + np.cross(aj.angular, r) + np.cross(vj.angular, v_point))
-
-
-def point_jacobian(model, data, frame, point):
-    joint = model.frames[frame].parentJoint
-    Jj = pin.getJointJacobian(model, data, joint, pin.LOCAL_WORLD_ALIGNED)
-    r = point - data.oMi[joint].translation
-    skew = np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
-    return Jj[:3] - skew @ Jj[3:]
 
 
 @pytest.mark.parametrize("with_spherical", [False, True], ids=["fused", "pinocchio-pass"])
@@ -104,8 +86,8 @@ def test_random_tree_against_pinocchio(with_spherical, armature):
             expected_J = T @ point_jacobian(model, ref, c.frame, point)
             np.testing.assert_allclose(J[rows], expected_J, rtol=0, atol=1e-12 * np.abs(expected_J).max())
             # drift J' v: tangential rows the contact point's, the normal row the centre's
-            acc_point = classical_acceleration(model, ref, c.frame, point)
-            acc_centre = classical_acceleration(model, ref, c.frame, centre)
+            acc_point = point_acceleration(model, ref, c.frame, point)
+            acc_centre = point_acceleration(model, ref, c.frame, centre)
             expected = np.array([T[0] @ acc_point, T[1] @ acc_point, n @ acc_centre])
             np.testing.assert_allclose(drift[rows], expected, rtol=0, atol=1e-11 * max(1.0, np.abs(expected).max()))
             # the gap: the sphere's lowest point above the plane (n made unit by the model)
@@ -134,9 +116,9 @@ def test_solo_drift_matches_pinocchio_at_a_moving_state():
         n = np.asarray(h.normal)
         centre = ref.oMf[c.frame].act(np.asarray(c.offset))
         point = centre - c.radius * n
-        acc_point = classical_acceleration(model, ref, c.frame, point)
+        acc_point = point_acceleration(model, ref, c.frame, point)
         expected = np.array([h.tangent1 @ acc_point, h.tangent2 @ acc_point,
-                             n @ classical_acceleration(model, ref, c.frame, centre)])
+                             n @ point_acceleration(model, ref, c.frame, centre)])
         np.testing.assert_allclose(drift[row:row + 3], expected, rtol=0, atol=1e-12 * np.abs(expected).max())
         row += 3
     assert row == 12
