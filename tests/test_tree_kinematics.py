@@ -197,3 +197,24 @@ def test_robot_operator_by_chains(tmp_path, kernels):
         assert A.shape == reference.shape and A.shape[0] == (3 if tag == "rows-1-2" else A.shape[0]) >= 3
         np.testing.assert_array_equal(A, A.T)
         np.testing.assert_allclose(A, reference, rtol=0, atol=1e-12 * np.abs(reference).max())
+
+
+@pytest.mark.parametrize("base_kp", [0.0, 3.0])
+def test_joint_pd_torque_against_pinocchio_difference(base_kp):
+    """tau = kp (q_target (-) q) + kd (v_target - v) + tau_ff: revolute joints by q_target - q and a free
+    base without stiffness skipped (its log6 unused), or, with a stiffness on the base, Pinocchio's
+    difference on the manifold: both equal the formula with pinocchio.difference."""
+    sim = Simulator(load_scene("solo12-stand"))
+    model = sim.scene.model
+    rng = np.random.default_rng(8)
+    kp = np.array(sim.data.kp)
+    kp[:6] = base_kp
+    sim.data.kp = kp
+    q_target = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+    sim.data.q_target = q_target
+    q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+    v = rng.standard_normal(model.nv)
+    _core.build_contact_problem(sim.model, sim.data, q, v, 1e-3, 0.5)
+    expected = kp * pin.difference(model, q, q_target) + np.asarray(sim.data.kd) * (
+        np.asarray(sim.data.v_target) - v) + np.asarray(sim.data.tau_ff)
+    np.testing.assert_allclose(np.asarray(sim.data.tau), expected, rtol=0, atol=1e-12 * np.abs(expected).max())

@@ -33,7 +33,22 @@ void computeControl(const SimulatorModel& sim, SimulatorData& sd, const Eigen::V
       c.q_target.size() != sim.model.nq)
     throw std::invalid_argument("control: kp, kd, v_target, tau_ff need nv = " + std::to_string(nv) +
                                 " entries and q_target nq = " + std::to_string(sim.model.nq));
-  pinocchio::difference(sim.model, q, c.q_target, sd.dv);  // q_target (-) q, on the manifold
+  // q_target (-) q on the manifold, where a stiffness uses it: a vector-space joint's is
+  // q_target - q (as Pinocchio's difference), a joint without stiffness (a robot's free base: its
+  // log6 was most of Pinocchio's difference) contributes kp dv = 0; else Pinocchio's difference.
+  const pinocchio::Model& model = sim.model;
+  bool direct = true;
+  for (pinocchio::JointIndex j = 1; direct && j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+    direct = sim.vector_joint[j] || c.kp.segment(model.idx_vs[j], model.nvs[j]).isZero(0.0);
+  if (direct) {
+    sd.dv.resize(nv);
+    for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j) {
+      const int iv = model.idx_vs[j], iq = model.idx_qs[j], n = model.nvs[j];
+      for (int k = 0; k < n; ++k) sd.dv[iv + k] = sim.vector_joint[j] ? c.q_target[iq + k] - q[iq + k] : 0.0;
+    }
+  } else {
+    pinocchio::difference(model, q, c.q_target, sd.dv);
+  }
   sd.tau = c.kp.cwiseProduct(sd.dv) + c.kd.cwiseProduct(c.v_target - v) + c.tau_ff;
 }
 

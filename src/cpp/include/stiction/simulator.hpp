@@ -174,6 +174,11 @@ class SimulatorModel {
 
   // derived
   std::vector<pinocchio::JointIndex> free_flyers;
+  /// Per world joint: a vector-space joint (revolute or prismatic, bounded: q has nv entries and
+  /// q (+) v = q + v, q1 (-) q0 = q1 - q0, as Pinocchio's Lie groups compute them).
+  std::vector<char> vector_joint;
+  /// Every joint a vector-space joint or a free flyer (integration joint by joint, integrate.cpp).
+  bool simple_joints = false;
   /// The parts of the world (one per subtree of the universe), in the order of their roots.
   std::vector<SystemModel> systems;
   std::vector<int> joint_system;                   ///< world joint -> its part (-1: the universe)
