@@ -37,14 +37,15 @@ void computeControl(const SimulatorModel& sim, SimulatorData& sd, const Eigen::V
   // q_target - q (as Pinocchio's difference), a joint without stiffness (a robot's free base: its
   // log6 was most of Pinocchio's difference) contributes kp dv = 0; else Pinocchio's difference.
   const pinocchio::Model& model = sim.model;
-  bool direct = true;
+  const auto vector_space = [&](pinocchio::JointIndex j) { return sim.tree[j].kind != TreeJoint::Kind::kFreeFlyer; };
+  bool direct = !sim.tree.empty();
   for (pinocchio::JointIndex j = 1; direct && j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
-    direct = sim.vector_joint[j] || c.kp.segment(model.idx_vs[j], model.nvs[j]).isZero(0.0);
+    direct = vector_space(j) || c.kp.segment(model.idx_vs[j], model.nvs[j]).isZero(0.0);
   if (direct) {
     sd.dv.resize(nv);
     for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j) {
       const int iv = model.idx_vs[j], iq = model.idx_qs[j], n = model.nvs[j];
-      for (int k = 0; k < n; ++k) sd.dv[iv + k] = sim.vector_joint[j] ? c.q_target[iq + k] - q[iq + k] : 0.0;
+      for (int k = 0; k < n; ++k) sd.dv[iv + k] = vector_space(j) ? c.q_target[iq + k] - q[iq + k] : 0.0;
     }
   } else {
     pinocchio::difference(model, q, c.q_target, sd.dv);

@@ -38,12 +38,12 @@ void integrateConfiguration(const SimulatorModel& sim, const Eigen::VectorXd& q,
                             Eigen::VectorXd& out) {
   const pinocchio::Model& model = sim.model;
   out.resize(model.nq);
-  if (sim.simple_joints) {
+  if (!sim.tree.empty()) {
     // joint by joint with the Lie groups' own operations, as pinocchio::integrate's visitor calls
     // them (the same values, without its dispatch over the joint variant): q + h v, or SE(3)'s
     for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j) {
       const int iq = model.idx_qs[j], iv = model.idx_vs[j];
-      if (sim.vector_joint[j]) {
+      if (sim.tree[j].kind != TreeJoint::Kind::kFreeFlyer) {
         for (int k = 0; k < model.nvs[j]; ++k) out[iq + k] = q[iq + k] + h * v[iv + k];
       } else {
         const Eigen::Matrix<double, 6, 1> step = h * v.segment<6>(iv);

@@ -93,9 +93,10 @@ inline void addFreeBodyPointJacobian(const Eigen::Matrix3d& R, const Eigen::Vect
 // Rows [lr, lr + k) of a robot part's J += sign T (rows 0..k-1) times the world velocity Jacobian of
 // the material point r (in joint j's frame): from the world-frame joint Jacobian of stage 1, a
 // column (v_o, omega) moves the point p = oMi r at v_o + omega x p. Only the columns of j and its
-// ancestors (Pinocchio's parents_fromRow) are nonzero. Written into J entry by entry: a 3 x nv
-// point Jacobian first, then T times it, read the point Jacobian's columns back two values at a
-// time right after writing them (loads spanning two stores), and multiplied its zero columns too.
+// ancestors (Pinocchio's parents_fromRow) are nonzero. Written into J entry by entry (a 3 x nv
+// point Jacobian first and T times it after, as before, read that Jacobian's columns back two
+// values at a time right after writing them, loads spanning two stores, and multiplied its zero
+// columns too).
 void addPointRows(const pinocchio::Model& m, SystemWork& w, pinocchio::JointIndex j, const Eigen::Vector3d& r,
                   const Eigen::Matrix3d& T, int k, int lr, double sign) {
   const Eigen::Vector3d p = w.data.oMi[j].act(r);

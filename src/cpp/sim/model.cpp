@@ -137,16 +137,9 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
     throw std::invalid_argument(
         "the penalty formulation integrates its springs by implicit Euler over the time step (Kikuuwe-Fujimoto, "
         "eq. 83-84): it needs mode 'timestep', not an ODE mode");
-  vector_joint.assign(static_cast<std::size_t>(model.njoints), 0);
-  simple_joints = true;
-  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j) {
-    const std::string kind = model.joints[j].shortname();
-    if (kind == "JointModelFreeFlyer") free_flyers.push_back(j);
-    vector_joint[j] = kind == "JointModelRX" || kind == "JointModelRY" || kind == "JointModelRZ" ||
-                      kind == "JointModelPX" || kind == "JointModelPY" || kind == "JointModelPZ" ||
-                      kind == "JointModelRevoluteUnaligned" || kind == "JointModelPrismaticUnaligned";
-    simple_joints = simple_joints && (vector_joint[j] || kind == "JointModelFreeFlyer");
-  }
+  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+    if (model.joints[j].shortname() == "JointModelFreeFlyer") free_flyers.push_back(j);
+  tree = treeOf(model);
   splitIntoSystems(model, systems, joint_system, joint_local);
   slot_pair.assign(contacts.size(), -1);
   for (std::size_t p = 0; p < pairs.size(); ++p) {

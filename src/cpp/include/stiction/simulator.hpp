@@ -124,13 +124,9 @@ struct JointControl {
   Eigen::VectorXd tau_ff;     ///< nv
 };
 
-/// An independent part of the world: a subtree of the model hanging from the universe (a
-/// robot, a free body), given a Model of its own so that its Data is sized by its own nv
-/// (a Pinocchio Data holds nv^3 tensors: one Data for 64 free cubes in one Model is 1.9 GB).
-/// Parts interact only through contacts: A = sum over parts of J_s M_s^-1 J_s^T (eq. 22),
-/// block-sparse when the parts are many.
-/// One joint of a robot part as the fused kinematics pass reads it (src/cpp/sim/tree.cpp):
-/// revolute or prismatic about x, y, z (`axis`) or any unit `direction`, or a free flyer.
+/// One joint as the fused kinematics pass (src/cpp/sim/tree.cpp) and the joint-by-joint PD and
+/// integration read it: revolute or prismatic about x, y, z (`axis`) or any unit `direction`, or
+/// a free flyer.
 struct TreeJoint {
   enum class Kind { kRevolute, kPrismatic, kFreeFlyer };
   Kind kind = Kind::kRevolute;
@@ -146,6 +142,11 @@ struct TreeJoint {
 /// one is of another kind (planar, spherical, unbounded, ...: Pinocchio's forward kinematics).
 std::vector<TreeJoint> treeOf(const pinocchio::Model& model);
 
+/// An independent part of the world: a subtree of the model hanging from the universe (a
+/// robot, a free body), given a Model of its own so that its Data is sized by its own nv
+/// (a Pinocchio Data holds nv^3 tensors: one Data for 64 free cubes in one Model is 1.9 GB).
+/// Parts interact only through contacts: A = sum over parts of J_s M_s^-1 J_s^T (eq. 22),
+/// block-sparse when the parts are many.
 struct SystemModel {
   pinocchio::Model model;
   /// Its joints for the fused kinematics pass (treeOf); empty: Pinocchio's forwardKinematics.
@@ -174,11 +175,11 @@ class SimulatorModel {
 
   // derived
   std::vector<pinocchio::JointIndex> free_flyers;
-  /// Per world joint: a vector-space joint (revolute or prismatic, bounded: q has nv entries and
-  /// q (+) v = q + v, q1 (-) q0 = q1 - q0, as Pinocchio's Lie groups compute them).
-  std::vector<char> vector_joint;
-  /// Every joint a vector-space joint or a free flyer (integration joint by joint, integrate.cpp).
-  bool simple_joints = false;
+  /// The world's joints as treeOf describes them (revolute and prismatic: vector-space joints,
+  /// q (+) v = q + v and q1 (-) q0 = q1 - q0 as Pinocchio's Lie groups compute them; free flyers),
+  /// or empty when another kind is among them: the joint PD and the configuration update then go
+  /// through Pinocchio's difference and integrate over the whole model.
+  std::vector<TreeJoint> tree;
   /// The parts of the world (one per subtree of the universe), in the order of their roots.
   std::vector<SystemModel> systems;
   std::vector<int> joint_system;                   ///< world joint -> its part (-1: the universe)
