@@ -393,6 +393,55 @@ def test_the_held_factor_serves_a_resting_tower_and_never_decides_an_answer():
     np.testing.assert_allclose(other @ r.lam, target, rtol=0, atol=1e-10 * np.linalg.norm(target))
 
 
+def test_a_well_conditioned_held_factor_steps_by_one_product():
+    """A standing robot's A (12 rows, condition ~6) keeps its factor for hundreds of steps; from the
+    factor's first reuse on, the refinement step is one product with G = R^-1 A R^-1 (made once, from
+    the held factor) instead of four triangular solves. Each step must still land on the all-stick
+    solution in one refinement: A lambda = b to the tolerance, the answer the held factor's solves
+    give. (A wrong G, e.g. R^-2 subtracted without rho, misses by far more than 1e-10 and the solver
+    falls back to a fresh factor: the outcome would not say "held factor".) In a thread of its own:
+    its own solver, whose held-factor history (which other tests leave behind) starts empty."""
+    import threading
+
+    outcomes, failures = [], []
+
+    def run():
+        try:
+            _standing_robot_steps(outcomes)
+        except BaseException as e:  # noqa: BLE001 - re-raised in the test's thread
+            failures.append(e)
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    thread.join()
+    if failures:
+        raise failures[0]
+    assert outcomes == ["converged (held factor)"] * 6, outcomes
+
+
+def _standing_robot_steps(outcomes):
+    rng = np.random.default_rng(7)
+    Q, _ = np.linalg.qr(rng.normal(size=(12, 12)))
+    A = Q @ np.diag(np.linspace(1.0, 6.0, 12)) @ Q.T
+    A = 0.5 * (A + A.T)
+    lam = np.tile([0.0, 0.0, 1.0], 4)  # the feet's weight, friction well inside the cones
+    b = A @ lam
+    first = stiction.solve(stiction.spatial_problem(A, b, 0.5), solver="default")
+    first = stiction.solve(stiction.spatial_problem(A, 1.001 * b, 0.5), warm_start=first.lam)  # factors A
+    assert first.converged
+    for k in range(6):
+        # a step later: the same A (to its rounding), b moved by the robot's sway
+        Ak = A * (1.0 + 1e-9 * k)
+        target = Ak @ (lam + 1e-3 * np.tile(rng.uniform(-1, 1, 3) * [0.1, 0.1, 1.0], 4))
+        r = stiction.solve(stiction.spatial_problem(Ak, target, 0.5), warm_start=first.lam)
+        assert r.converged and stage_names(r) == ["sticking step"], r.stages
+        assert r.stages[0].iterations == 1, r.stages  # one refinement step
+        outcomes.append(r.stages[0].outcome)
+        np.testing.assert_allclose(Ak @ r.lam, target, rtol=0, atol=1e-10 * np.linalg.norm(target))
+        np.testing.assert_allclose(r.lam, np.linalg.solve(Ak, target), rtol=0, atol=1e-12 * np.linalg.norm(target))
+        first = r
+
+
 def test_a_resting_grid_is_solved_by_the_sticking_step():
     """16 cubes side by side (192 rows): the first solves are Gauss-Seidel's, which leave some corners'
     friction on the cone's boundary (the corners squeezing the ground at mu lambda_n: forces in A's

@@ -740,11 +740,8 @@ bool DefaultSolver::stickingStep(const ContactProblem& problem, Eigen::VectorXd&
       // A's range. (The plain proximal step R^-1 (A x - b) also moves by r_0 / rho along A's null
       // space, r_0 the part of A x - b no force can cancel (b's rounding, gaps no rigid motion
       // fits): on a 64-box tower 2e-3 N s a step, until a corner's force left its cone.)
-      // (A R^-1 r = r - rho R^-1 r: the filter costs a second solve, not a product)
       const double previous = natural_map;
-      solveShifted(stick_u_, stick_d_);
-      stick_w_ = stick_u_ - stick_factor_shift_ * stick_d_;
-      solveShifted(stick_w_, stick_d_);
+      refinementDirection(stick_u_, stick_d_);
       ++solves;
       stick_x_ -= stick_d_;
       A.multiplyWithAbs(stick_x_, stick_u_, stick_abs_);
@@ -771,6 +768,7 @@ bool DefaultSolver::stickingStep(const ContactProblem& problem, Eigen::VectorXd&
   if (heldFactorFits(problem)) {
     if (stale_one_step_ || stale_rate_ * initial_map <= test.threshold() || ++stale_skipped_ >= kStaleRetry) {
       stale_skipped_ = 0;
+      if (stick_step_state_ == StepMatrix::kNone) prepareStepMatrix();
       const int done = refine();
       stale_rate_ = first_map >= 0.0 && initial_map > 0.0 ? first_map / initial_map : 1.0;
       stale_one_step_ = done == 1 && solves == 1;
@@ -792,12 +790,45 @@ bool DefaultSolver::stickingStep(const ContactProblem& problem, Eigen::VectorXd&
   }
   stick_factor_rows_ = problem.numRows();
   stick_factor_shift_ = kStickShift * scale;
+  stick_step_state_ = StepMatrix::kNone;  // (a fresh factor's own step: the solves)
   stick_factor_diagonal_ = stick_diagonal_;
   if (refine() == 1) {
     lam = stick_x_;
     return true;
   }
   return false;
+}
+
+void DefaultSolver::refinementDirection(const Eigen::VectorXd& r, Eigen::VectorXd& d) {
+  if (stick_step_state_ == StepMatrix::kReady) {
+    d.noalias() = stick_step_matrix_ * r;
+    return;
+  }
+  // (A R^-1 r = r - rho R^-1 r: the filter costs a second solve, not a product)
+  solveShifted(r, d);
+  stick_w_ = r - stick_factor_shift_ * d;
+  solveShifted(stick_w_, d);
+}
+
+void DefaultSolver::prepareStepMatrix() {
+  stick_step_state_ = StepMatrix::kRefused;
+  const Eigen::Index m = stick_factor_rows_;
+  if (stick_sparse_path_ || m <= 0 || m > kStickSmallRows || stick_shifted_.rows() != m) return;
+  // Explicit inverses are as accurate as the solves only while R is well conditioned; near a
+  // rank-deficient A (a sole's four corners: R^-1 ~ 1 / rho along A's null space) R^-1 - rho R^-2
+  // would cancel to nothing. The pivots bound cond(R) from below (free: TALOS's soles, 1e11, stop
+  // here, before an inverse); then its 1-norm condition number, exactly, from R and R^-1.
+  const auto pivots = stick_llt_.matrixLLT().diagonal().cwiseAbs();
+  const double spread = pivots.maxCoeff() / pivots.minCoeff();
+  if (!(spread * spread <= kStepMatrixMaxCondition)) return;
+  stick_step_matrix_.setIdentity(m, m);
+  stick_llt_.solveInPlace(stick_step_matrix_);  // R^-1
+  const double cond = stick_shifted_.cwiseAbs().colwise().sum().maxCoeff() *
+                      stick_step_matrix_.cwiseAbs().colwise().sum().maxCoeff();
+  if (!(cond <= kStepMatrixMaxCondition)) return;
+  stick_step_work_.noalias() = stick_step_matrix_ * stick_step_matrix_;
+  stick_step_matrix_ -= stick_factor_shift_ * stick_step_work_;
+  stick_step_state_ = StepMatrix::kReady;
 }
 
 void DefaultSolver::solveShifted(const Eigen::VectorXd& rhs, Eigen::VectorXd& x) const {
