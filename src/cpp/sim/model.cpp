@@ -185,7 +185,12 @@ SystemWork::SystemWork(const SystemModel& s)
       tau(Eigen::VectorXd::Zero(s.model.nv)),
       nle(Eigen::VectorXd::Zero(s.model.nv)),
       v_free(Eigen::VectorXd::Zero(s.model.nv)),
-      x(Eigen::VectorXd::Zero(s.model.nv)) {}
+      x(Eigen::VectorXd::Zero(s.model.nv)) {
+  const auto revolute = s.tree.empty() ? 0 : std::count_if(s.tree.begin() + 1, s.tree.end(), [](const TreeJoint& t) {
+    return t.kind == TreeJoint::Kind::kRevolute;
+  });
+  trig.assign(3 * static_cast<std::size_t>((revolute + 3) / 4 * 4), 0.0);
+}
 
 SimulatorData::SimulatorData(const SimulatorModel& sim)
     : q(pinocchio::neutral(sim.model)),

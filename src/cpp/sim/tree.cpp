@@ -21,8 +21,46 @@
 #include <pinocchio/multibody/joint/joints.hpp>
 
 #include "stages.hpp"
+#include "stiction/vector_kernels.hpp"
+
+#if defined(STICTION_X86_KERNELS) && defined(STICTION_HAVE_LIBMVEC)
+#include <immintrin.h>
+// glibc's vector math library (libmvec, linked when CMake finds it): 4 lanes, AVX2, within 4 ulp
+extern "C" __attribute__((target("avx2"))) __m256d _ZGVdN4v_sin(__m256d);
+extern "C" __attribute__((target("avx2"))) __m256d _ZGVdN4v_cos(__m256d);
+#endif
 
 namespace stiction {
+
+namespace {
+
+// sin and cos of x[0..n) into s, c (each padded to a multiple of 4). A robot's revolute joints all
+// at once, before the pass: Solo-12's 12 scalar sincos calls cost 0.17 us of a 4.8 us step, four
+// lanes at a time ~0.03 us.
+#if defined(STICTION_X86_KERNELS) && defined(STICTION_HAVE_LIBMVEC)
+__attribute__((target("avx2,fma"))) void sinCosAvx2(const double* x, std::size_t padded, double* s, double* c) {
+  for (std::size_t i = 0; i < padded; i += 4) {
+    const __m256d v = _mm256_loadu_pd(x + i);
+    _mm256_storeu_pd(s + i, _ZGVdN4v_sin(v));
+    _mm256_storeu_pd(c + i, _ZGVdN4v_cos(v));
+  }
+}
+#endif
+
+void jointSinCos(const double* x, std::size_t n, std::size_t padded, double* s, double* c) {
+#if defined(STICTION_X86_KERNELS) && defined(STICTION_HAVE_LIBMVEC)
+  if (vectorKernels()) {
+    sinCosAvx2(x, padded, s, c);
+    return;
+  }
+#endif
+  for (std::size_t i = 0; i < n; ++i) {
+    s[i] = std::sin(x[i]);
+    c[i] = std::cos(x[i]);
+  }
+}
+
+}  // namespace
 
 std::vector<TreeJoint> treeOf(const pinocchio::Model& model) {
   std::vector<TreeJoint> tree(static_cast<std::size_t>(model.njoints));
@@ -180,6 +218,17 @@ void treeKinematics(const SystemModel& part, SystemWork& w) {
   data.oMi[0].setIdentity();
   data.ov[0].setZero();
   data.oa[0].setZero();
+  // the revolute joints' sines and cosines first, all at once
+  const std::size_t padded = w.trig.size() / 3;
+  double* angle = w.trig.data();
+  const double* sines = angle + padded;
+  const double* cosines = angle + 2 * padded;
+  std::size_t revolute = 0;
+  for (int i = 1; i < model.njoints; ++i)
+    if (part.tree[static_cast<std::size_t>(i)].kind == TreeJoint::Kind::kRevolute)
+      angle[revolute++] = q[part.tree[static_cast<std::size_t>(i)].idx_q];
+  jointSinCos(angle, revolute, padded, angle + padded, angle + 2 * padded);
+  revolute = 0;
   for (int i = 1; i < model.njoints; ++i) {
     const TreeJoint& t = part.tree[static_cast<std::size_t>(i)];
     pinocchio::SE3& parent = data.oMi[t.parent];
@@ -193,7 +242,8 @@ void treeKinematics(const SystemModel& part, SystemWork& w) {
     Spatial motion;  // S q' in the world (the joint's motion subspace times its velocity)
     switch (t.kind) {
       case TreeJoint::Kind::kRevolute: {
-        const double c = std::cos(q[t.idx_q]), s = std::sin(q[t.idx_q]);
+        const double c = cosines[revolute], s = sines[revolute];
+        ++revolute;
         if (t.axis >= 0) {
           // R0 times the rotation by q about axis k: columns k1, k2 turn in their plane
           const int k = t.axis;

@@ -245,6 +245,9 @@ struct SystemWork {
   std::vector<int> v_index;  ///< the world velocity coordinate of each local one (SystemModel's)
   Eigen::VectorXd q, v, zero, tau, nle, v_free, x;  ///< local coordinates; x: scratch
   Eigen::VectorXd row_values;                       ///< one value per row of J (scratch)
+  /// The fused pass's revolute joints, in tree order: angles, then sines, then cosines (each
+  /// padded to a multiple of 4: the vector kernel's lanes)
+  std::vector<double> trig;
   std::vector<double> Wt;                           ///< a free body's W^T by columns, padded (the vector kernel's)
   std::vector<int> rows;  ///< the problem row of each row of J (contacts touching this part)
   Eigen::MatrixXd J;      ///< rows x nv of the part: its columns of the contact Jacobian
