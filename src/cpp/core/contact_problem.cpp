@@ -22,7 +22,7 @@ std::string fmt(double x) {
 ContactProblem::ContactProblem(std::shared_ptr<const DelassusOperator> delassus, Eigen::VectorXd b,
                                std::vector<Constraint> constraints, double asymmetry_tolerance,
                                bool check_definiteness)
-    : delassus_(std::move(delassus)), b_(std::move(b)), constraints_(std::move(constraints)) {
+    : delassus_(std::move(delassus)), b_(std::move(b)), b_norm_(b_.norm()), constraints_(std::move(constraints)) {
   if (!delassus_) throw std::invalid_argument("ContactProblem: no Delassus operator given");
   const Eigen::Index m = delassus_->rows();
   if (b_.size() != m)
@@ -113,6 +113,7 @@ void ContactProblem::setB(const Eigen::Ref<const Eigen::VectorXd>& b) {
                                 " entries, got " + std::to_string(b.size()));
   if (!b.allFinite()) throw std::invalid_argument("ContactProblem.set_b: b has NaN or infinite entries");
   b_ = b;
+  b_norm_ = b_.norm();
 }
 
 }  // namespace stiction

@@ -54,7 +54,7 @@ void measureExactLaw(const ContactProblem& problem, const Eigen::Ref<const Eigen
     problem.delassus().multiply(lam, out.u);
     out.u -= problem.b();
   }
-  out.b_norm = problem.b().norm();
+  out.b_norm = problem.bNorm();
   out.lambda_norm = lam.norm();
   out.natural_map = naturalMapNorm(problem, lam, out.u);
   out.residual = out.natural_map / (1.0 + out.b_norm);
@@ -63,75 +63,109 @@ void measureExactLaw(const ContactProblem& problem, const Eigen::Ref<const Eigen
   out.speed_floor = relative_speed_floor * problem.b().lpNorm<Eigen::Infinity>();
   classifyStates(problem, lam, out.u, out.states);
 
+  // One pass over the blocks: every per-block entry written (0 where a measure does not apply),
+  // the aggregates kept as it goes (a robot's step measures 4 blocks: separate zeroing, copies
+  // and reductions cost more than the measures).
   for (Eigen::VectorXd* v : {&out.primal, &out.dual, &out.complementarity, &out.signorini, &out.dissipation,
                              &out.dissipation_angle, &out.liftoff})
-    v->setZero(nbi);
+    v->resize(nbi);
   out.sliding.assign(nb, false);
-  out.w = out.u;
+  out.w.resize(m);
   out.num_sliding = 0;
   out.liftoff_max = 0.0;
+  // (NaN wins: a measure of a non-finite lambda says so)
+  const auto raise = [](double& max, double x) {
+    if (x > max || std::isnan(x)) max = std::isnan(max) ? max : x;
+  };
+  double primal_max = 0.0, primal_sq = 0.0, dual_max = 0.0, dual_sq = 0.0, comp_max = 0.0, comp_sum = 0.0;
+  double signorini_max = 0.0, dissipation_max = 0.0, angle_max = 0.0;
   bool any_sliding = false;
+  const double* lp = lam.data();
+  const double* up = out.u.data();
+  double* wp = out.w.data();
 
   for (std::size_t i = 0; i < nb; ++i) {
     const Eigen::Index o = off[i];
     const int k = cons[i].size;
-    const auto l = lam.segment(o, k);
-    const auto u = out.u.segment(o, k);
-    auto w = out.w.segment(o, k);
+    const double* l = lp + o;
+    const double* u = up + o;
+    double* w = wp + o;
+    double primal = 0.0, dual = 0.0, comp = 0.0, signorini = 0.0, dissipation = 0.0, angle = 0.0, liftoff = 0.0;
+    for (int r = 0; r < k; ++r) w[r] = u[r];
     if (cons[i].kind == ConstraintKind::kBilateral) {
       // C = R^k, C* = {0} (eq. 14-15): lambda is free, w = u must vanish.
-      out.dual[i] = u.norm();
-      out.complementarity[i] = std::abs(l.dot(u));
-      continue;
-    }
-    const Eigen::Index n = k - 1;  // normal row last
-    if (cons[i].kind == ConstraintKind::kUnilateral) {
+      double uu = 0.0, lu = 0.0;
+      for (int r = 0; r < k; ++r) {
+        uu += u[r] * u[r];
+        lu += l[r] * u[r];
+      }
+      dual = std::sqrt(uu);
+      comp = std::abs(lu);
+    } else if (cons[i].kind == ConstraintKind::kUnilateral) {
       // C = C* = R+ (eq. 43): lambda_n >= 0, u_n >= 0, lambda_n u_n = 0.
-      out.primal[i] = std::max(0.0, -l[n]);
-      out.dual[i] = std::max(0.0, -u[n]);
-      out.complementarity[i] = out.signorini[i] = std::abs(l[n] * u[n]);
-      continue;
-    }
-    // Friction block (t, n) or (t1, t2, n).
-    const double mu = cons[i].mu;
-    const double ut = k == 3 ? norm2(u[0], u[1]) : std::abs(u[0]);
-    const double lt = k == 3 ? norm2(l[0], l[1]) : std::abs(l[0]);
-    w[n] += mu * ut;  // De Saxce: w = u + E s(u), s = mu ||u_t|| (eq. 76-77)
-    out.primal[i] = distanceToCone(lt, l[n], mu);
-    out.dual[i] = distanceToDualCone(ut, w[n], mu);  // w_t = u_t
-    out.complementarity[i] = std::abs(l.dot(w));     // eq. 75
-    out.signorini[i] = std::abs(l[n] * u[n]);
-    if (!(ut > out.speed_floor && l[n] > 0.0)) continue;
-    // Sliding: maximum dissipation wants lambda_t = -mu lambda_n u_t / ||u_t|| (eq. 58, 66).
-    out.sliding[i] = true;
-    ++out.num_sliding;
-    const double c = mu * l[n] / ut;
-    double dot, cross;  // of lambda_t with -u_t
-    if (k == 3) {
-      out.dissipation[i] = norm2(l[0] + c * u[0], l[1] + c * u[1]);
-      dot = -(l[0] * u[0] + l[1] * u[1]);
-      cross = std::abs(l[0] * u[1] - l[1] * u[0]);
+      primal = std::max(0.0, -l[0]);
+      dual = std::max(0.0, -u[0]);
+      comp = signorini = std::abs(l[0] * u[0]);
     } else {
-      out.dissipation[i] = std::abs(l[0] + c * u[0]);
-      dot = -l[0] * u[0];
-      cross = 0.0;
+      // Friction block (t, n) or (t1, t2, n).
+      const int n = k - 1;  // normal row last
+      const double mu = cons[i].mu;
+      const double ut = k == 3 ? norm2(u[0], u[1]) : std::abs(u[0]);
+      const double lt = k == 3 ? norm2(l[0], l[1]) : std::abs(l[0]);
+      w[n] += mu * ut;  // De Saxce: w = u + E s(u), s = mu ||u_t|| (eq. 76-77)
+      primal = distanceToCone(lt, l[n], mu);
+      dual = distanceToDualCone(ut, w[n], mu);  // w_t = u_t
+      double lw = 0.0;
+      for (int r = 0; r < k; ++r) lw += l[r] * w[r];
+      comp = std::abs(lw);  // eq. 75
+      signorini = std::abs(l[n] * u[n]);
+      if (ut > out.speed_floor && l[n] > 0.0) {
+        // Sliding: maximum dissipation wants lambda_t = -mu lambda_n u_t / ||u_t|| (eq. 58, 66).
+        out.sliding[i] = true;
+        ++out.num_sliding;
+        const double c = mu * l[n] / ut;
+        double dot, cross;  // of lambda_t with -u_t
+        if (k == 3) {
+          dissipation = norm2(l[0] + c * u[0], l[1] + c * u[1]);
+          dot = -(l[0] * u[0] + l[1] * u[1]);
+          cross = std::abs(l[0] * u[1] - l[1] * u[0]);
+        } else {
+          dissipation = std::abs(l[0] + c * u[0]);
+          dot = -l[0] * u[0];
+          cross = 0.0;
+        }
+        angle = lt > 0.0 ? std::atan2(cross, dot) : 0.0;  // in [0, pi]
+        liftoff = u[n];  // exact: 0 (<lambda, w> = lambda_n u_n); CCP: mu ||u_t||
+        out.liftoff_max = any_sliding ? std::max(out.liftoff_max, u[n]) : u[n];
+        any_sliding = true;
+      }
     }
-    out.dissipation_angle[i] = lt > 0.0 ? std::atan2(cross, dot) : 0.0;  // in [0, pi]
-    out.liftoff[i] = u[n];  // exact: 0 (<lambda, w> = lambda_n u_n); CCP: mu ||u_t||
-    out.liftoff_max = any_sliding ? std::max(out.liftoff_max, u[n]) : u[n];
-    any_sliding = true;
+    out.primal[i] = primal;
+    out.dual[i] = dual;
+    out.complementarity[i] = comp;
+    out.signorini[i] = signorini;
+    out.dissipation[i] = dissipation;
+    out.dissipation_angle[i] = angle;
+    out.liftoff[i] = liftoff;
+    raise(primal_max, primal);
+    raise(dual_max, dual);
+    raise(comp_max, comp);
+    raise(signorini_max, signorini);
+    raise(dissipation_max, dissipation);
+    raise(angle_max, angle);
+    primal_sq += primal * primal;
+    dual_sq += dual * dual;
+    comp_sum += comp;
   }
-
-  auto maxOf = [nbi](const Eigen::VectorXd& v) { return nbi > 0 ? v.maxCoeff() : 0.0; };
-  out.primal_max = maxOf(out.primal);
-  out.primal_norm = out.primal.norm();
-  out.dual_max = maxOf(out.dual);
-  out.dual_norm = out.dual.norm();
-  out.complementarity_max = maxOf(out.complementarity);
-  out.complementarity_sum = out.complementarity.sum();
-  out.signorini_max = maxOf(out.signorini);
-  out.dissipation_max = maxOf(out.dissipation);
-  out.dissipation_angle_max = maxOf(out.dissipation_angle);
+  out.primal_max = primal_max;
+  out.primal_norm = std::sqrt(primal_sq);
+  out.dual_max = dual_max;
+  out.dual_norm = std::sqrt(dual_sq);
+  out.complementarity_max = comp_max;
+  out.complementarity_sum = comp_sum;
+  out.signorini_max = signorini_max;
+  out.dissipation_max = dissipation_max;
+  out.dissipation_angle_max = angle_max;
 }
 
 ExactLawMeasures exactLawMeasures(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,

@@ -28,7 +28,7 @@ double residual(const ContactProblem& problem, const Eigen::Ref<const Eigen::Vec
   Eigen::VectorXd u(lam.size());
   problem.delassus().multiply(lam, u);
   u -= problem.b();
-  return naturalMapNorm(problem, lam, u) / (1.0 + problem.b().norm());
+  return naturalMapNorm(problem, lam, u) / (1.0 + problem.bNorm());
 }
 
 void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
@@ -189,7 +189,7 @@ void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSet
   const double threshold = settings.tolerance * scale;
   VerdictMeasures measures;
   measureVerdict(problem, result.lam, measures, threshold);
-  result.residual = measures.natural_map / (1.0 + problem.b().norm());
+  result.residual = measures.natural_map / (1.0 + problem.bNorm());
   result.relative_residual = measures.natural_map / scale;
   result.residual_bound = measures.bound / scale;
   result.precision_floor = measures.floor / scale;

@@ -151,7 +151,7 @@ double naturalMapNorm(const ContactProblem& problem, const Eigen::Ref<const Eige
 }
 
 double stoppingScale(const ContactProblem& problem) {
-  const double nb = problem.b().norm();
+  const double nb = problem.bNorm();
   return nb > 0.0 ? nb : 1.0;
 }
 

@@ -116,7 +116,7 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
   switch (sim.settings.mode) {
     case IntegrationMode::kTimeStepping: {  // eq. 70: delta = h, zeta = 1/2, impulses P = h lambda
       const double h = sim.settings.dt;
-      Stopwatch watch;
+      Stopwatch watch(start);  // (beginStep's few ns go to the kinematics)
       forwardKinematics(sim, sd, sd.q, sd.v);  // placements, J' v, joint Jacobians
       detectContacts(sim, sd);                 // gaps, the active set
       contactJacobians(sim, sd, sd.v);         // J, drift J' v, Psi

@@ -39,6 +39,8 @@ class ContactProblem {
 
   const DelassusOperator& delassus() const { return *delassus_; }
   const Eigen::VectorXd& b() const { return b_; }
+  /// ||b||, kept with b (the verdict, the stopping test and the exact-law measures all scale by it)
+  double bNorm() const { return b_norm_; }
   const std::vector<Constraint>& constraints() const { return constraints_; }
   /// Row offset of block i (size numBlocks()+1; the last entry is numRows()).
   const std::vector<Eigen::Index>& offsets() const { return offsets_; }
@@ -54,6 +56,7 @@ class ContactProblem {
  private:
   std::shared_ptr<const DelassusOperator> delassus_;
   Eigen::VectorXd b_;
+  double b_norm_ = 0.0;
   std::vector<Constraint> constraints_;
   std::vector<Eigen::Index> offsets_;
   double asymmetry_ = 0.0;
