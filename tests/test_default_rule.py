@@ -442,6 +442,29 @@ def _standing_robot_steps(outcomes):
         first = r
 
 
+def test_a_settling_robot_keeps_its_factor_for_a_few_product_steps():
+    """Solo-12 settling on its feet (the first 0.5 s): A moves a little every step, so its held
+    factor needs 2-3 refinement steps where a fresh one needs 1. With the step matrix G a step is one
+    product, cheaper than a fresh factor: the held factor serves most steps (one step's rule
+    refactored 320 of these 500). Every step still ends on the stopping test's verdict."""
+    import collections
+
+    from stiction.scene import load_scene
+    from stiction.simulator import Simulator
+
+    sim = Simulator(load_scene("solo12-stand"))
+    seen = collections.Counter()
+    for _ in range(500):
+        sim.step()
+        r = sim.data.result
+        assert r.converged and stage_names(r) == ["sticking step"], r.stages
+        assert r.relative_residual + r.residual_bound <= 1e-10
+        stage = r.stages[0]
+        seen["warm start" if stage.iterations == 0 else "held" if "held" in stage.outcome else "fresh"] += 1
+    assert seen["fresh"] <= 60, seen
+    assert seen["held"] >= 400, seen
+
+
 def test_a_resting_grid_is_solved_by_the_sticking_step():
     """16 cubes side by side (192 rows): the first solves are Gauss-Seidel's, which leave some corners'
     friction on the cone's boundary (the corners squeezing the ground at mu lambda_n: forces in A's

@@ -146,6 +146,8 @@ class DefaultSolver final : public ContactSolver {
   /// A small dense factor reused from an earlier call gives its refinement step as one product
   /// with G = R^-1 A R^-1 (prepareStepMatrix) while R's 1-norm condition number is at most this.
   static constexpr double kStepMatrixMaxCondition = 1e6;
+  /// Refinement steps by the product with G that are cheaper than a fresh factor and its step.
+  static constexpr int kHeldStepsWithProduct = 3;
 
   std::string name() const override { return "default"; }
   void iterate(const ContactProblem& problem, const SolverSettings& settings,
@@ -191,7 +193,7 @@ class DefaultSolver final : public ContactSolver {
   double stick_factor_shift_ = 0.0;        // and its shift rho
   double stale_rate_ = 0.0;   // the natural map's reduction by the held factor's first step, last try
   int stale_skipped_ = 0;     // calls since the held factor was last tried
-  bool stale_one_step_ = false;  // its last try converged in one refinement step
+  bool stale_cheap_ = false;  // its last try converged in the steps worth taking (1, or with G a few)
   bool stick_used_held_ = false;  // the last sticking step converged with the held factor
   Eigen::VectorXd stick_diagonal_;         // this call's A's diagonal
   // The held small dense factor's step matrix G = R^-1 - rho R^-2 (= R^-1 A_f R^-1), made on the
