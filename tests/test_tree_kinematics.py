@@ -283,3 +283,43 @@ def test_joint_sines_and_cosines_at_any_angle(kernels):
                          capture_output=True, text=True, env=env)
     assert run.returncode == 0, run.stderr
     assert float(run.stdout.split()[-1]) <= 5e-15, run.stdout  # (measured: 7e-16 scalar, 9e-16 libmvec)
+
+
+@pytest.mark.parametrize("kernels", ["0", "1"])
+def test_velocity_update_by_the_chains(kernels):
+    """A robot whose A came from its chains takes M^-1 J^T P from the same Y = D^-1/2 U^-1 J^T
+    (one back substitution, dynamics.cpp): v+ = v + h M^-1 (tau - nle) + M^-1 J^T P against numpy's
+    solves with the step's own M, J, nle, tau and impulses, for Solo-12 moving (both kernel paths:
+    Y from the AVX2 kernel and from the portable loops). The base's linear velocity is re-expressed
+    in its turned frame after the update, so it is checked through the contact velocities J v+."""
+    import os
+    import subprocess
+    import sys
+
+    script = r"""
+import numpy as np
+from stiction import _core
+from stiction.simulator import Simulator
+sim = Simulator("solo12-stand")
+sim.rollout(0.1)
+rng = np.random.default_rng(5)
+sim.data.v = np.asarray(sim.data.v) + 0.05 * rng.standard_normal(sim.model.nv)
+v0 = np.asarray(sim.data.v).copy()
+rec = _core.rollout(sim.model, sim.data, 1, 1)
+h = sim.model.settings.dt
+J, M, nle, tau = (np.asarray(x) for x in (sim.data.J, sim.data.M, sim.data.nle, sim.data.tau))
+P = np.asarray(sim.data.result.lam)
+assert J.shape == (12, 18) and np.abs(P).max() > 0
+turn = np.zeros_like(v0)
+turn[:3] = h * np.cross(v0[3:6], v0[:3])  # the base's frame turn (integrate.cpp, addFrameTurn)
+impulse = np.linalg.solve(M, J.T @ P)
+vplus = v0 + h * np.linalg.solve(M, tau - nle) + turn + impulse
+joints = np.abs(np.asarray(rec["v"])[1][3:] - vplus[3:]).max() / np.abs(impulse).max()
+rows = np.abs(np.asarray(rec["contact_velocity"]).reshape(2, -1)[1][:12] - J @ vplus).max() / np.abs(J @ impulse).max()
+print(joints, rows)
+"""
+    env = dict(os.environ, STICTION_VECTOR_KERNELS=kernels)
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env)
+    assert run.returncode == 0, run.stderr
+    joints, rows = (float(x) for x in run.stdout.split())
+    assert joints <= 1e-13 and rows <= 1e-13, (joints, rows)

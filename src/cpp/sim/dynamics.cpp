@@ -505,8 +505,10 @@ bool samePartRows(const SimulatorData& sd) {
 
 void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
   const Eigen::Index rows = sd.rows;
+  sd.robot_chains = false;
   if (wholeWorldPart(sim, sd) && !sim.systems[0].free_body && robotOperator(sim, sd)) {
     // one robot, each contact on one root path: A by the tree's chains (robot_delassus.cpp)
+    sd.robot_chains = true;
     sd.sparse = false;
     sd.a_in_operator = false;
     if (sd.A_sparse.rows() != 0) sd.A_sparse.resize(0, 0);
@@ -628,6 +630,26 @@ void multiplyJacobian(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
 
 void solveJacobianTransposed(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& lambda,
                              Eigen::VectorXd& dv) {
+  if (sd.robot_chains) {
+    // M^-1 J^T lambda = U^-T D^-1/2 (Y lambda), Y = D^-1/2 U^-1 J^T the Delassus stage's (chain by
+    // chain, its blocks' entries on their chains): one back substitution instead of J^T lambda
+    // and both of M's
+    const RobotOperatorPlan& plan = sd.parts[0].robot_plan;
+    dv.setZero(sim.model.nv);
+    const double* Y = plan.Y.data();
+    for (const RobotOperatorPlan::Block& b : plan.blocks) {
+      const double* l = lambda.data() + b.row;
+      for (int a = 0; a < b.length; ++a) {
+        const double* y = Y + 4 * (b.start + a);  // (b.k values, zeros past them)
+        double sum = y[0] * l[0];
+        for (int r = 1; r < b.k; ++r) sum += y[r] * l[r];
+        dv[plan.chain[static_cast<std::size_t>(b.start + a)]] += sum;
+      }
+    }
+    for (Eigen::Index i = 0; i < dv.size(); ++i) dv[i] *= plan.scale[static_cast<std::size_t>(i)];
+    pinocchio::cholesky::Utiv(sim.systems[0].model, sd.parts[0].data, dv);
+    return;
+  }
   if (wholeWorldPart(sim, sd)) {
     dv.noalias() = sd.parts[0].J.transpose() * lambda;
     pinocchio::cholesky::solve(sim.systems[0].model, sd.parts[0].data, dv);

@@ -298,6 +298,9 @@ class SimulatorData {
   Eigen::MatrixXd A;                 ///< rows x rows, J M^-1 J^T (eq. 22), when dense
   Eigen::SparseMatrix<double> A_sparse;  ///< the same when sparse (many parts, > 96 rows)
   bool sparse = false;               ///< which of A, A_sparse holds the last problem's operator
+  /// A came from the robot's chains (robotOperator) at the last Delassus stage: its Y (the robot
+  /// plan's) is D^-1/2 U^-1 J^T for this J and M
+  bool robot_chains = false;
   Eigen::VectorXd b;                 ///< eq. 27 at force level
   Eigen::VectorXd drift;             ///< J' v per row
   Eigen::VectorXd position_error;    ///< Psi per row (gap on normal rows, anchor error; 0 else)
