@@ -127,7 +127,7 @@ void factorMass(const SystemModel& part, SystemWork& w, const JointControl& cont
   if (part.free_body)
     pinocchio::cholesky::decompose(model, w.data);
   else
-    treeDecompose(w.data);
+    treeDecompose(part, w.data);
   if (model.nv > 0 && !(w.data.D.minCoeff() > 0.0))
     throw std::runtime_error("the mass matrix of '" + model.name + "' is not positive definite at this configuration");
 }
@@ -168,7 +168,7 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
       for (int world : part.v_index) pd_on_diagonal = pd_on_diagonal || sd.control.kd[world] != 0.0 || sd.control.kp[world] != 0.0;
     const bool reuse = part.free_body && w.mass_factored && !pd_on_diagonal;
     w.mass_factored = part.free_body && !pd_on_diagonal;
-    if (!part.free_body) compositeBackwardPass(model, w.data, w.nle);  // M and nle (stage 1's terms)
+    if (!part.free_body) compositeBackwardPass(part, w.data, w.nle);  // M and nle (stage 1's terms)
     if (!reuse) {
       factorMass(part, w, sd.control, implicit_pd_step);
       w.has_free_body_scaling = part.free_body;

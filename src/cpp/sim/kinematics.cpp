@@ -97,13 +97,17 @@ inline void addFreeBodyPointJacobian(const Eigen::Matrix3d& R, const Eigen::Vect
 // point Jacobian first and T times it after, as before, read that Jacobian's columns back two
 // values at a time right after writing them, loads spanning two stores, and multiplied its zero
 // columns too).
-void addPointRows(const pinocchio::Model& m, SystemWork& w, pinocchio::JointIndex j, const Eigen::Vector3d& r,
+void addPointRows(const SystemModel& part, SystemWork& w, pinocchio::JointIndex j, const Eigen::Vector3d& r,
                   const Eigen::Matrix3d& T, int k, int lr, double sign) {
+  const pinocchio::Model& m = part.model;
   const Eigen::Vector3d p = w.data.oMi[j].act(r);
   const double px = p.x(), py = p.y(), pz = p.z();
   const Eigen::Index n = w.J.rows();
   double* J = w.J.data();
-  for (int c = m.idx_vs[j] + m.nvs[j] - 1; c >= 0; c = w.data.parents_fromRow[static_cast<std::size_t>(c)]) {
+  const int deepest = m.idx_vs[j] + m.nvs[j] - 1;  // (its ancestors: the joint's and the root path's)
+  for (auto a = part.ancestors.begin() + part.ancestors_start[static_cast<std::size_t>(deepest)];
+       a != part.ancestors.begin() + part.ancestors_start[static_cast<std::size_t>(deepest) + 1]; ++a) {
+    const int c = *a;
     const double* col = w.data.J.col(c).data();  // (v_o, omega)
     const double ux = col[0] + col[4] * pz - col[5] * py;
     const double uy = col[1] + col[5] * px - col[3] * pz;
@@ -150,8 +154,8 @@ void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& 
     const int lr = sd.part_fill[s];
     sd.part_fill[s] += k;
     for (int r = 0; r < k; ++r) w.J.row(lr + r).setZero();
-    if (partOf(sim, b.plus) == s) addPointRows(m, w, sim.joint_local[b.plus], at_plus, T, k, lr, 1.0);
-    if (partOf(sim, b.minus) == s) addPointRows(m, w, sim.joint_local[b.minus], at_minus, T, k, lr, -1.0);
+    if (partOf(sim, b.plus) == s) addPointRows(sim.systems[s], w, sim.joint_local[b.plus], at_plus, T, k, lr, 1.0);
+    if (partOf(sim, b.minus) == s) addPointRows(sim.systems[s], w, sim.joint_local[b.minus], at_minus, T, k, lr, -1.0);
     local_rows[p] = lr;
   }
 }

@@ -45,10 +45,10 @@ void treeKinematics(const SystemModel& part, SystemWork& w);
 void worldFrameTerms(const pinocchio::Model& model, pinocchio::Data& data);
 /// Stage 4's share of a robot part: M's upper triangle (armature included, as crba) and
 /// nle = C(q, v) v + g(q) from stage 1's world-frame terms, in one backward pass.
-void compositeBackwardPass(const pinocchio::Model& model, pinocchio::Data& data, Eigen::VectorXd& nle);
+void compositeBackwardPass(const SystemModel& part, pinocchio::Data& data, Eigen::VectorXd& nle);
 /// M = U D U^T as Pinocchio's cholesky::decompose (its tree-sparse factor, the same operations),
 /// written for this processor's store forwarding (tree.cpp).
-void treeDecompose(pinocchio::Data& data);
+void treeDecompose(const SystemModel& part, pinocchio::Data& data);
 
 /// Stage 1 for a free body (SystemModel::free_body) from w.q, w.v: oMi, v and a of its joint, as
 /// Pinocchio's forward kinematics would leave them; no joint Jacobian (data.J is not filled).

@@ -326,7 +326,10 @@ void worldFrameTerms(const pinocchio::Model& model, pinocchio::Data& data) {
   }
 }
 
-void compositeBackwardPass(const pinocchio::Model& model, pinocchio::Data& data, Eigen::VectorXd& nle) {
+void compositeBackwardPass(const SystemModel& part, pinocchio::Data& data, Eigen::VectorXd& nle) {
+  const pinocchio::Model& model = part.model;
+  const int* ancestors = part.ancestors.data();
+  const int* ancestors_start = part.ancestors_start.data();
   // Column k of M: the composite inertia of k's joint (its subtree) applied to J's column k,
   // dotted with the columns of k and its ancestors (Pinocchio's parents_fromRow); nle[k]: J's
   // column k dotted with the subtree's force. Armature on the diagonal, as crba adds it.
@@ -344,14 +347,16 @@ void compositeBackwardPass(const pinocchio::Model& model, pinocchio::Data& data,
       // J's columns were written long before (stage 1): read two values at a time
       const __m128d f01 = _mm_set_pd(F.linear.y, F.linear.x), f23 = _mm_set_pd(F.angular.x, F.linear.z),
                     f45 = _mm_set_pd(F.angular.z, F.angular.y);
-      for (int j = k; j >= 0; j = data.parents_fromRow[static_cast<std::size_t>(j)]) {
+      for (const int* a = ancestors + ancestors_start[k]; a != ancestors + ancestors_start[k + 1]; ++a) {
+        const int j = *a;
         const double* cj = J + 6 * j;
         const __m128d sum = _mm_add_pd(_mm_add_pd(_mm_mul_pd(_mm_loadu_pd(cj), f01), _mm_mul_pd(_mm_loadu_pd(cj + 2), f23)),
                                        _mm_mul_pd(_mm_loadu_pd(cj + 4), f45));
         M[k * nv + j] = _mm_cvtsd_f64(_mm_add_sd(sum, _mm_unpackhi_pd(sum, sum)));
       }
 #else
-      for (int j = k; j >= 0; j = data.parents_fromRow[static_cast<std::size_t>(j)]) {
+      for (const int* a = ancestors + ancestors_start[k]; a != ancestors + ancestors_start[k + 1]; ++a) {
+        const int j = *a;
         const Spatial cj = load6(J + 6 * j);
         M[k * nv + j] = dot(cj.linear, F.linear) + dot(cj.angular, F.angular);
       }
@@ -369,7 +374,7 @@ void compositeBackwardPass(const pinocchio::Model& model, pinocchio::Data& data,
   }
 }
 
-void treeDecompose(pinocchio::Data& data) {
+void treeDecompose(const SystemModel& part, pinocchio::Data& data) {
   // Pinocchio's cholesky::decompose, in its order of operations: for j from the last coordinate,
   // D_j = M_jj - sum_c U_jc^2 D_c and U_ij = (M_ij - sum_c U_ic U_jc D_c) / D_j for i among j's
   // ancestors, c over j's subtree. Its D_c U_jc went to a scratch vector written one entry at a
@@ -393,8 +398,10 @@ void treeDecompose(pinocchio::Data& data) {
     d -= sum;
     D[j] = d;
     Dinv[j] = 1.0 / d;
-    for (int i = data.parents_fromRow[static_cast<std::size_t>(j)]; i >= 0;
-         i = data.parents_fromRow[static_cast<std::size_t>(i)]) {
+    // (j's ancestors past j itself)
+    for (auto a = part.ancestors.begin() + part.ancestors_start[j] + 1; a != part.ancestors.begin() + part.ancestors_start[j + 1];
+         ++a) {
+      const int i = *a;
       double t = 0.0;
       for (Eigen::Index c = 0; c < nvt; ++c) t += U[(j + 1 + c) * nv + i] * DUt[c];
       U[j * nv + i] = (M[j * nv + i] - t) * Dinv[j];

@@ -156,6 +156,11 @@ struct SystemModel {
   /// One free-flyer joint: its mass matrix in its own frame (Pinocchio's LOCAL convention) is
   /// constant, factored once rather than every step (unless a joint PD adds to its diagonal).
   bool free_body = false;
+  /// Each coordinate's ancestors in M's tree (itself first, then up to the root: Pinocchio's
+  /// parents_fromRow followed), coordinate k's at ancestors[ancestors_start[k], ancestors_start[k + 1]).
+  /// A list walked by index: following parents_fromRow chains a load per step (its latency, ~6
+  /// cycles, was the backward pass's critical path).
+  std::vector<int> ancestors_start, ancestors;
 };
 
 class SimulatorModel {
