@@ -300,3 +300,31 @@ def test_arguments_are_checked_and_named():
         stiction.exact_law_measures(p, np.ones(3), relative_speed_floor="x")
     e = stiction.exact_law_measures(p, [0, 0, 1])  # a list of ints is an array
     assert e.lambda_norm == 1.0
+
+
+def test_a_simulated_steps_measures_are_taken_when_read():
+    """The simulator's per-step solves leave the exact-law measures to whoever reads them
+    (sim.data.result measures them then, of the problem that step solved: A and h b): they equal
+    exact_law_measures of that problem and lambda, for a robot standing and a cube sliding."""
+    import stiction
+    from stiction.scene import load_scene
+    from stiction.simulator import Simulator
+
+    for name in ("solo12-stand", "cube-slide"):
+        sim = Simulator(load_scene(name))
+        sim.rollout(0.05)
+        r = sim.data.result
+        h = sim.model.settings.dt
+        mu = [sim.scene.contacts[i].mu for i in sim.data.active]
+        A, b = np.asarray(sim.data.A), h * np.asarray(sim.data.b)
+        problem = stiction.spatial_problem(A, b, mu)
+        independent = stiction.exact_law_measures(problem, r.lam)
+        carried = r.exact_law
+        # (u = A lambda - b here from numpy's product: the two differ by rounding, ~1e-16 of the scale)
+        scale = np.linalg.norm(b) + np.linalg.norm(A) * np.linalg.norm(r.lam)
+        for field in ("natural_map", "primal_max", "dual_max", "dissipation_max", "liftoff_max"):
+            assert getattr(carried, field) == pytest.approx(getattr(independent, field), rel=1e-9, abs=1e-12 * scale), field
+        assert carried.complementarity_max == pytest.approx(independent.complementarity_max, abs=1e-12 * scale ** 2)
+        assert carried.num_sliding == independent.num_sliding
+        assert list(carried.states) == list(r.states)
+        assert carried.num_sliding == (4 if name == "cube-slide" else 0)

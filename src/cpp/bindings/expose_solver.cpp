@@ -237,7 +237,12 @@ void exposeSolver() {
                     "the formulation met its own stopping test (exact solvers: = converged)")
       .def_readonly("own_residual", &SolverResult::own_residual, "the formulation's own measure (own_law)")
       .def_readonly("own_law", &SolverResult::own_law, "what own_residual measures")
-      .add_property("exact_law", +[](const SolverResult& r) { return r.exact_law; },
+      .add_property("exact_law", +[](const SolverResult& r) {
+                      if (!r.exact_law_measured)  // (SolverSettings::measure_exact_law off: never stale numbers)
+                        throw std::runtime_error("exact_law: this result's measures were not taken; "
+                                                 "stiction.exact_law_measures(problem, result.lam) measures them");
+                      return r.exact_law;
+                    },
                     "ExactLawMeasures at lam (the same yardstick for every formulation)");
   {
     bp::class_<FormulationSettings> fs("FormulationSettings",

@@ -29,6 +29,9 @@ struct SolverSettings {
   int proxqp_max_iterations = 20000;  ///< ProxQP's inner iterations in all, per ProxQP run
   double admm_rho = 0.0;       ///< 0: chosen from the spectrum of A
   double time_limit = 0.0;     ///< seconds, 0 = none; covers every stage (warm start included)
+  /// false: result.exact_law is left unmeasured (exact_law_measured false; result.states still
+  /// classified). The simulator's per-step solves: its result measures them when asked for.
+  bool measure_exact_law = true;
 };
 
 /// The residual every result reports: naturalMapNorm / (1 + ||b||).
@@ -72,6 +75,7 @@ struct SolverResult {
   /// The exact law's measures at lam, part by part (exact_law.hpp), whatever produced it:
   /// the same yardstick for every formulation, computed by the driver.
   ExactLawMeasures exact_law;
+  bool exact_law_measured = false;  ///< exact_law holds this lam's measures (SolverSettings::measure_exact_law)
 
   /// Set by the algorithms: iterates that ran away, or ProxQP's ray of unboundedness;
   /// the verdict tests them as infeasibility certificates.
