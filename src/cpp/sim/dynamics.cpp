@@ -101,7 +101,7 @@ void partMassSolve(const SystemModel& part, pinocchio::Data& data, Eigen::Vector
   if (part.free_body)
     freeBodyMassSolve(data, x.data());
   else
-    pinocchio::cholesky::solve(part.model, data, x);
+    treeSolve(part, data, x);
 }
 
 // M of one part (a robot's: already from this step's kinematics, compositeBackwardPass; a free
@@ -652,7 +652,7 @@ void solveJacobianTransposed(const SimulatorModel& sim, SimulatorData& sd, const
   }
   if (wholeWorldPart(sim, sd)) {
     dv.noalias() = sd.parts[0].J.transpose() * lambda;
-    pinocchio::cholesky::solve(sim.systems[0].model, sd.parts[0].data, dv);
+    partMassSolve(sim.systems[0], sd.parts[0].data, dv);
     return;
   }
   dv.setZero(sim.model.nv);

@@ -49,6 +49,8 @@ void compositeBackwardPass(const SystemModel& part, pinocchio::Data& data, Eigen
 /// M = U D U^T as Pinocchio's cholesky::decompose (its tree-sparse factor, the same operations),
 /// written for this processor's store forwarding (tree.cpp).
 void treeDecompose(const SystemModel& part, pinocchio::Data& data);
+/// x = M^-1 x from treeDecompose's factor (U^-1 by columns over each coordinate's ancestors).
+void treeSolve(const SystemModel& part, const pinocchio::Data& data, Eigen::VectorXd& x);
 
 /// Stage 1 for a free body (SystemModel::free_body) from w.q, w.v: oMi, v and a of its joint, as
 /// Pinocchio's forward kinematics would leave them; no joint Jacobian (data.J is not filled).
