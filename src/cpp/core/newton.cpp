@@ -769,13 +769,14 @@ bool DefaultSolver::stickingStep(const ContactProblem& problem, Eigen::VectorXd&
   // on its feet: 2-3 steps, where one step's rule refactored 9 steps in 10). Whatever the factor,
   // only StoppingTest's verdict is kept.
   if (heldFactorFits(problem)) {
-    const bool product_steps = stick_step_state_ != StepMatrix::kRefused && !stick_sparse_path_ &&
-                               problem.numRows() <= kStickSmallRows;
-    const int worth = product_steps ? kHeldStepsWithProduct : 1;
-    if (stale_cheap_ || std::pow(stale_rate_, worth) * initial_map <= test.threshold() ||
+    // (a factor not tried since it was made may still get G: predicted at its best)
+    const bool may_have_product = stick_step_state_ != StepMatrix::kRefused && !stick_sparse_path_ &&
+                                  problem.numRows() <= kStickSmallRows;
+    if (stale_cheap_ || std::pow(stale_rate_, may_have_product ? kHeldStepsWithProduct : 1) * initial_map <= test.threshold() ||
         ++stale_skipped_ >= kStaleRetry) {
       stale_skipped_ = 0;
       if (stick_step_state_ == StepMatrix::kNone) prepareStepMatrix();
+      const int worth = stick_step_state_ == StepMatrix::kReady ? kHeldStepsWithProduct : 1;
       const int done = refine();
       stale_rate_ = first_map >= 0.0 && initial_map > 0.0 ? first_map / initial_map : 1.0;
       stale_cheap_ = done == 1 && solves <= worth;
