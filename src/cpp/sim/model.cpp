@@ -67,20 +67,12 @@ void splitIntoSystems(const pinocchio::Model& world, std::vector<SystemModel>& s
     part.v_start = contiguousStart(part.v_index);
     part.free_body = part.model.njoints == 2 && part.model.joints[1].shortname() == "JointModelFreeFlyer";
     if (!part.free_body) part.tree = treeOf(part.model);
-    // parents_fromRow as Pinocchio defines it: a joint's first coordinate hangs from its parent
-    // joint's last, its others from the one before
-    const pinocchio::Model& m = part.model;
-    std::vector<int> parent(static_cast<std::size_t>(m.nv), -1);
-    for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(m.njoints); ++j)
-      for (int k = 0; k < m.nvs[j]; ++k) {
-        const pinocchio::JointIndex p = m.parents[j];
-        parent[static_cast<std::size_t>(m.idx_vs[j] + k)] =
-            k > 0 ? m.idx_vs[j] + k - 1 : (p == 0 ? -1 : m.idx_vs[p] + m.nvs[p] - 1);
-      }
+    // each coordinate's root path from Pinocchio's own parents_fromRow (a Data of the part)
+    const pinocchio::Data data(part.model);
     part.ancestors_start.assign(1, 0);
     part.ancestors.clear();
-    for (int k = 0; k < m.nv; ++k) {
-      for (int c = k; c >= 0; c = parent[static_cast<std::size_t>(c)]) part.ancestors.push_back(c);
+    for (int k = 0; k < part.model.nv; ++k) {
+      for (int c = k; c >= 0; c = data.parents_fromRow[static_cast<std::size_t>(c)]) part.ancestors.push_back(c);
       part.ancestors_start.push_back(static_cast<int>(part.ancestors.size()));
     }
   }

@@ -10,19 +10,46 @@
 
 namespace stiction {
 
+namespace {
+
+// The arrays of a recording in the block's order, each with its columns per record (-1: a vector,
+// one value): size(), allocate() and fields() all read this one list.
+struct Array {
+  const char* name;
+  Eigen::Map<Eigen::VectorXd> Recording::*vector;  // (one of the two set)
+  Eigen::Map<Recording::Rows> Recording::*rows;
+  Eigen::Index cols;
+};
+
+std::vector<Array> arrays(const SimulatorModel& sim) {
+  const Eigen::Index nc = sim.numCandidates(), na = static_cast<Eigen::Index>(sim.anchors.size());
+  using R = Recording;
+  return {{"t", &R::t, nullptr, -1},
+          {"q", nullptr, &R::q, sim.model.nq},
+          {"v", nullptr, &R::v, sim.model.nv},
+          {"lam", nullptr, &R::lam, 3 * nc},
+          {"contact_velocity", nullptr, &R::contact_velocity, 3 * nc},
+          {"gaps", nullptr, &R::gaps, nc},
+          {"states", nullptr, &R::states, nc},
+          {"rows", nullptr, &R::rows, nc},
+          {"anchor_lam", nullptr, &R::anchor_lam, 3 * na},
+          {"residual", &R::residual, nullptr, -1},
+          {"iterations", &R::iterations, nullptr, -1},
+          {"converged", &R::converged, nullptr, -1},
+          {"dt", &R::dt, nullptr, -1},
+          {"timings", nullptr, &R::timings, 5}};
+}
+
+}  // namespace
+
 std::size_t Recording::size(const SimulatorModel& sim, int n_steps, int every) {
-  const auto n = static_cast<std::size_t>(n_steps / every + 1);
-  const auto nc = static_cast<std::size_t>(sim.numCandidates());
-  // t, q, v, lam, contact_velocity, gaps, states, rows, anchor_lam, residual, iterations,
-  // converged, dt, timings
-  const std::size_t per_record = 1 + static_cast<std::size_t>(sim.model.nq + sim.model.nv) + 9 * nc +
-                                 3 * sim.anchors.size() + 4 + 5;
-  return n * per_record;
+  std::size_t per_record = 0;
+  for (const Array& a : arrays(sim)) per_record += static_cast<std::size_t>(a.cols < 0 ? 1 : a.cols);
+  return static_cast<std::size_t>(n_steps / every + 1) * per_record;
 }
 
 void Recording::allocate(const SimulatorModel& sim, int n_steps, int every, double* storage) {
   const Eigen::Index n = n_steps / every + 1;
-  const Eigen::Index nc = sim.numCandidates(), na = static_cast<Eigen::Index>(sim.anchors.size());
   const std::size_t total = size(sim, n_steps, every);
   if (storage == nullptr) {
     own_.resize(total);
@@ -30,33 +57,30 @@ void Recording::allocate(const SimulatorModel& sim, int n_steps, int every, doub
   } else {
     own_.clear();
   }
+  double* at = storage;
+  for (const Array& a : arrays(sim)) {
+    if (a.vector != nullptr) {
+      new (&(this->*a.vector)) Eigen::Map<Eigen::VectorXd>(at, n);
+      at += n;
+    } else {
+      new (&(this->*a.rows)) Eigen::Map<Rows>(at, n, a.cols);
+      at += n * a.cols;
+    }
+  }
+  fields_ = {};
+  for (const Array& a : arrays(sim)) {
+    const double* p = a.vector != nullptr ? (this->*a.vector).data() : (this->*a.rows).data();
+    fields_.push_back({a.name, static_cast<std::size_t>(p - storage), a.cols});
+  }
+  laid_out_ = total;
+  clear();
+}
+
+void Recording::clear() {
   // NaN until recorded; and the block's fresh pages are faulted in here, not by the loop's first
   // writes (the operating system clearing a page in the middle of the steps evicted their working
   // set: measured +0.9 us a Solo-12 step)
-  std::fill(storage, storage + total, std::numeric_limits<double>::quiet_NaN());
-  double* at = storage;  // (in the order of size() and fields())
-  const auto vector = [&](Eigen::Map<Eigen::VectorXd>& x) {
-    new (&x) Eigen::Map<Eigen::VectorXd>(at, n);
-    at += n;
-  };
-  const auto matrix = [&](Eigen::Map<Rows>& x, Eigen::Index cols) {
-    new (&x) Eigen::Map<Rows>(at, n, cols);
-    at += n * cols;
-  };
-  vector(t);
-  matrix(q, sim.model.nq);
-  matrix(v, sim.model.nv);
-  matrix(lam, 3 * nc);
-  matrix(contact_velocity, 3 * nc);
-  matrix(gaps, nc);
-  matrix(states, nc);
-  matrix(rows, nc);
-  matrix(anchor_lam, 3 * na);
-  vector(residual);
-  vector(iterations);
-  vector(converged);
-  vector(dt);
-  matrix(timings, 5);
+  std::fill(t.data(), t.data() + laid_out_, std::numeric_limits<double>::quiet_NaN());
   records = 0;
   error.clear();
 }
@@ -65,25 +89,6 @@ bool Recording::fits(const SimulatorModel& sim, int n_steps, int every) const {
   return t.data() != nullptr && t.size() == n_steps / every + 1 && q.cols() == sim.model.nq &&
          v.cols() == sim.model.nv && gaps.cols() == sim.numCandidates() &&
          anchor_lam.cols() == 3 * static_cast<Eigen::Index>(sim.anchors.size());
-}
-
-std::vector<Recording::Field> Recording::fields() const {
-  const double* base = t.data();
-  const auto offset = [&](const double* p) { return static_cast<std::size_t>(p - base); };
-  return {{"t", 0, -1},
-          {"q", offset(q.data()), q.cols()},
-          {"v", offset(v.data()), v.cols()},
-          {"lam", offset(lam.data()), lam.cols()},
-          {"contact_velocity", offset(contact_velocity.data()), contact_velocity.cols()},
-          {"gaps", offset(gaps.data()), gaps.cols()},
-          {"states", offset(states.data()), states.cols()},
-          {"rows", offset(rows.data()), rows.cols()},
-          {"anchor_lam", offset(anchor_lam.data()), anchor_lam.cols()},
-          {"residual", offset(residual.data()), -1},
-          {"iterations", offset(iterations.data()), -1},
-          {"converged", offset(converged.data()), -1},
-          {"dt", offset(dt.data()), -1},
-          {"timings", offset(timings.data()), timings.cols()}};
 }
 
 void Recording::record(const SimulatorModel& sim, const SimulatorData& d) {
@@ -128,7 +133,10 @@ void run(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Re
 
 void rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out) {
   checkCounts(n_steps, every);
-  if (!out.fits(sim, n_steps, every)) out.allocate(sim, n_steps, every);
+  if (!out.fits(sim, n_steps, every))
+    out.allocate(sim, n_steps, every);
+  else if (out.records != 0)
+    out.clear();  // (laid out for these counts but used: NaN again, from its first row)
   run(sim, d, n_steps, every, out);
 }
 

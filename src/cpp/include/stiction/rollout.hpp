@@ -41,18 +41,21 @@ struct Recording {
   void allocate(const SimulatorModel& sim, int n_steps, int every, double* storage = nullptr);
   /// True when the arrays are laid out for these counts (allocate need not run again).
   bool fits(const SimulatorModel& sim, int n_steps, int every) const;
+  /// NaN in every array again, no record (the layout kept).
+  void clear();
   /// The arrays in the block's order, each with its offset (in doubles) and columns (-1: a vector).
   struct Field {
     const char* name;
     std::size_t offset;
     Eigen::Index cols;
   };
-  std::vector<Field> fields() const;
-  const double* block() const { return t.data(); }
+  const std::vector<Field>& fields() const { return fields_; }
   void record(const SimulatorModel& sim, const SimulatorData& d);
 
  private:
   std::vector<double> own_;
+  std::vector<Field> fields_;  // (set by allocate, from the one list of arrays in rollout.cpp)
+  std::size_t laid_out_ = 0;   // doubles in the block
 };
 
 /// n_steps of `d` from its current state, recording every `every`-th (into `out` as laid out by
