@@ -129,7 +129,7 @@ def cmd_demo(args) -> int:
         print(f"== {scene}: {sim.scene.description}")
         keys = ("steps", "us_per_step", "max_penetration", "max_residual", "base_drift", "max_foot_slip",
                 "max_normal_velocity_while_sliding", "mean_acceleration_along_slope",
-                "expected_sliding_acceleration")
+                "expected_sliding_acceleration", "final_base_speed", "final_base_sway", "settled")
         for k in keys:
             print(f"   {k:36s} {summary[k]:.4g}" if isinstance(summary[k], float) else f"   {k:36s} {summary[k]}")
         print("   µs per phase: " + ", ".join(f"{k} {v:.2f}" for k, v in summary["us_per_phase"].items()))

@@ -398,6 +398,7 @@ class Simulator:
                 iq = sc.model.joints[j].idx_q
                 d = np.linalg.norm(traj.q[after][:, iq:iq + 3] - traj.q[i0, iq:iq + 3], axis=1).max()
                 body_drift = max(body_drift, float(d))
+        base_speed, base_sway, settled = _rest_measures(sc.model, traj)
         tim = np.median(traj.timings[1:], axis=0) if len(traj.t) > 1 else np.zeros(5)
         out = {
             "scene": sc.name,
@@ -426,8 +427,16 @@ class Simulator:
             "max_foot_displacement": displacement,
             "rows_per_contact": rows_per_contact,
             "contact_rows": contact_rows,
+            "final_base_speed": base_speed,
+            "final_base_sway": base_sway,
+            "settled": settled,
         }
-        out["warnings"] = _warnings(out)
+        # a robot holding a posture whose contacts stick but whose base still moves sways (PD too soft
+        # or a start posture off the settled one); one that slides or falls is not warned about
+        window = traj.t >= traj.t[-1] - SETTLED_WINDOW - 1e-12
+        actuated = bool((self.data.kp != 0).any() or (self.data.kd != 0).any())
+        sticking = bool((traj.states[window] == 1).any() and not (traj.states[window] == 2).any())
+        out["warnings"] = _warnings(out, swaying=out["settled"] is False and actuated and sticking)
         return out
 
 
@@ -467,15 +476,58 @@ def _with_friction(scene: Scene, mu: float) -> Scene:
     return dataclasses.replace(scene, contacts=contacts, pairs=pairs, mu=mu)
 
 
+# `settled` (Simulator.summary): every floating base (free flyer or planar root: a robot's base, a
+# free body) moves slower than SETTLED_SPEED at the end and stayed within SETTLED_SWAY of its final
+# position over the final SETTLED_WINDOW of the run (the whole run when shorter).
+SETTLED_SPEED = 1e-3  # m/s
+SETTLED_SWAY = 1e-3  # m
+SETTLED_WINDOW = 0.5  # s
+
+
+def _floating_roots(model: pin.Model) -> list[tuple[int, int, int]]:
+    """(joint, first q index of its position, first v index) of every free-flyer or planar root."""
+    out = []
+    for j in range(1, model.njoints):
+        kind = model.joints[j].shortname()
+        if model.parents[j] == 0 and kind in ("JointModelFreeFlyer", "JointModelPlanar"):
+            out.append((j, model.joints[j].idx_q, model.joints[j].idx_v))
+    return out
+
+
+def _rest_measures(model: pin.Model, traj: Trajectory) -> tuple:
+    """(final_base_speed, final_base_sway, settled): the largest speed of a floating base's origin at
+    the last record, the largest distance of a base's origin from its final position over the final
+    SETTLED_WINDOW, and whether both are below SETTLED_SPEED and SETTLED_SWAY; (None, None, None)
+    without a floating base (a fixed-base robot)."""
+    roots = _floating_roots(model)
+    if not roots:
+        return None, None, None
+    window = traj.t >= traj.t[-1] - SETTLED_WINDOW - 1e-12
+    speed = sway = 0.0
+    for j, iq, iv in roots:
+        if model.joints[j].shortname() == "JointModelFreeFlyer":
+            # v[:3] is the origin's velocity in the base frame: its norm is the world speed
+            position, velocity = traj.q[:, iq:iq + 3], traj.v[-1, iv:iv + 3]
+        else:  # planar: (x, y) in the joint's plane, v = (vx, vy) in the body frame
+            position, velocity = traj.q[:, iq:iq + 2], traj.v[-1, iv:iv + 2]
+        speed = max(speed, float(np.linalg.norm(velocity)))
+        sway = max(sway, float(np.linalg.norm(position[window] - position[-1], axis=1).max()))
+    return speed, sway, bool(speed < SETTLED_SPEED and sway < SETTLED_SWAY)
+
+
 PENETRATION_WARNING = 1e-3  # m
 
 
-def _warnings(summary: dict) -> list[str]:
+def _warnings(summary: dict, swaying: bool = False) -> list[str]:
     """What a reader of the summary should not miss (also printed by `stiction simulate`)."""
     out = []
     if summary["max_penetration"] > PENETRATION_WARNING:
         out.append(f"max penetration {summary['max_penetration']:.3g} m exceeds {PENETRATION_WARNING:g} m: the step "
                    f"dt = {summary['dt']:g} s is too coarse for the impact speeds (contacts are detected once per step)")
+    if swaying:
+        out.append(f"the robot has not settled: its base moves at {summary['final_base_speed']:.3g} m/s at the end "
+                   f"and swayed {summary['final_base_sway']:.3g} m over the final {SETTLED_WINDOW:g} s (settled: "
+                   f"< {SETTLED_SPEED:g} m/s and < {SETTLED_SWAY:g} m) while its contacts stick")
     if not summary["all_converged"]:
         out.append(f"{summary['unconverged_steps']} of {summary['steps']} steps did not solve the contact problem "
                    f"to the tolerance (first at t = {summary['first_unconverged_t']:.6g} s)")
