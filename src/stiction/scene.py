@@ -23,6 +23,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import _core
+from ._validation import vector
 from .resources import robots_dir as bundled_robots_dir
 from .resources import scenes_dir
 from .robots import load_robot, load_urdf, robot_package_dirs
@@ -495,9 +496,7 @@ def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = 
     if q0 is None:
         q = pin.neutral(model)
     else:
-        from .simulator import _vector
-
-        q = _quaternion_check(model, _vector("q0", q0, model.nq), "q0", strict=False)
+        q = _quaternion_check(model, vector("q0", q0, model.nq), "q0", strict=False)
     contacts = []
     for k, spec in enumerate(spheres):
         if isinstance(spec, (str, bytes)) or not hasattr(spec, "__len__") or len(spec) not in (2, 3):

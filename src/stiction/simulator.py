@@ -12,7 +12,9 @@ import numpy as np
 import pinocchio as pin
 
 from . import _core
-from .scene import Scene, load_scene
+from ._validation import positive as _positive
+from ._validation import vector as _vector
+from .scene import Scene, _quaternion_check, load_scene
 from .formulations import PARAMETERS as FORMULATION_PARAMETERS
 from .formulations import check_name as check_formulation
 from .formulations import settings_for as formulation_settings
@@ -96,15 +98,6 @@ OVERRIDES = {
 _MODES = {"timestep": 0, "rk4": 1, "ode": 1, "adaptive": 2}
 MAX_RECORD_BYTES = 4e9  # a trajectory larger than this is refused before simulating
 MAX_STEPS = 1e9  # steps in one rollout (a C++ int counts them; a typo'd dt must not hang or overflow)
-
-
-def _positive(name: str, value, allow_zero: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise TypeError(f"{name} must be a number, got {type(value).__name__} {value!r}")
-    x = float(value)
-    if not math.isfinite(x) or x < 0 or (x == 0 and not allow_zero):
-        raise ValueError(f"{name} must be a finite number {'>=' if allow_zero else '>'} 0, got {value!r}")
-    return x
 
 
 class _ReadOnly:
@@ -431,23 +424,7 @@ class Simulator:
         return out
 
 
-def _vector(name: str, x, n: int) -> np.ndarray:
-    if x is None or isinstance(x, (str, bytes)):
-        raise TypeError(f"{name} must be an array of {n} numbers, got {type(x).__name__}")
-    a = np.asarray(x)
-    if a.dtype.kind not in "biuf":
-        raise TypeError(f"{name} must be an array of {n} real numbers, got dtype {a.dtype}")
-    a = a.astype(np.float64).reshape(-1) if a.ndim <= 1 else a
-    if a.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},), got {np.shape(x)}")
-    if not np.isfinite(a).all():
-        raise ValueError(f"{name} has NaN or infinite entries")
-    return a
-
-
 def _normalized_configuration(model, q: np.ndarray) -> np.ndarray:
-    from .scene import _quaternion_check
-
     return _quaternion_check(model, q, "q", strict=False)
 
 
