@@ -130,11 +130,15 @@ class Simulator:
     With another formulation than exact, ``converged`` (per step) is the formulation's own
     stopping test and ``residual`` stays the exact law's, the same yardstick for all.
 
-    State: ``sim.data.q``, ``.v``, ``.t`` and the control vectors (``kp``, ``kd``, ``q_target``,
-    ``v_target``, ``tau_ff``) read as *copies* (numpy arrays detached from the simulator: changing
-    an entry of one changes nothing); assigning a whole array sets it (size and finiteness are
-    checked). The supported way to set the state is :meth:`set_state`, which also normalises
-    quaternions; :meth:`reset` returns to the scene's initial state.
+    Control: ``sim.data.kp``, ``.kd``, ``.q_target``, ``.v_target``, ``.tau_ff`` read as numpy
+    *views* on the simulator's data: ``sim.data.tau_ff[:] = u`` (or ``[i] = x``) takes effect at the
+    next step, as does assigning a whole array (``sim.data.tau_ff = u``: shape, dtype and
+    finiteness checked). State and outputs: ``sim.data.q``, ``.v`` and every array the last step
+    left (``A``, ``b``, ``gaps``, ``candidate_lambda``, ...) read as *read-only copies*: writing
+    into one raises. The supported way to set the state is :meth:`set_state`, which also
+    normalises quaternions; :meth:`reset` returns to the scene's initial state and control (into
+    the same data: views taken before stay valid). ``sim.data`` is the same object for the
+    simulator's life (it cannot be replaced).
     """
 
     def __init__(self, scene: Scene | str | os.PathLike, **overrides):
@@ -156,7 +160,7 @@ class Simulator:
         settings = self._settings_from(sc, overrides)
         self.model = _core.SimulatorModel(sc.model, sc.halfspaces, sc.contacts, sc.anchors, settings,
                                           sc.geometry, sc.pairs)
-        self.data = _core.SimulatorData(self.model)
+        self._data = _core.SimulatorData(self.model)
         self.reset()
 
     @staticmethod
@@ -203,6 +207,18 @@ class Simulator:
         return _ReadOnly(self.model.settings)
 
     @property
+    def data(self) -> _core.SimulatorData:
+        """The state, control and last step's outputs (one object for the simulator's life, so the
+        control views taken from it stay bound to this simulator)."""
+        return self._data
+
+    @data.setter
+    def data(self, value) -> None:
+        raise AttributeError("Simulator.data cannot be replaced (views of its control arrays would be left "
+                             "pointing at the old one); set the state with set_state(q, v, t), the control "
+                             "through sim.data.tau_ff etc., or reset()")
+
+    @property
     def dt(self) -> float:
         """The time step (read-only: build a new Simulator(scene, dt=...) to change it)."""
         return float(self.model.settings.dt)
@@ -216,10 +232,12 @@ class Simulator:
         return names
 
     def reset(self) -> None:
-        """Back to the scene's initial state, time 0 and control."""
+        """Back to the scene's initial state, time 0 and control (v_target 0). Written into the
+        same data: views of the control arrays stay valid and show the scene's values."""
         sc, d = self.scene, self.data
         d.q, d.v, d.t = sc.q0, sc.v0, 0.0
         d.kp, d.kd, d.q_target, d.tau_ff = sc.kp, sc.kd, sc.q_target, sc.tau_ff
+        d.v_target = np.zeros(sc.model.nv)
 
     def set_state(self, q=None, v=None, t: float | None = None) -> None:
         """Set the configuration q (nq), velocity v (nv) and/or time t. Arrays are checked for
@@ -317,7 +335,7 @@ class Simulator:
                 raise TypeError(f"batch_rollout: states[{k}] must be a (q, v) pair") from None
             clone = Simulator.__new__(Simulator)
             clone.scene, clone.duration, clone.model = self.scene, self.duration, self.model
-            clone.data = _core.SimulatorData(self.model)
+            clone._data = _core.SimulatorData(self.model)
             clone.data.q, clone.data.v, clone.data.t = self.data.q, self.data.v, self.data.t
             clone.data.kp, clone.data.kd = self.data.kp, self.data.kd
             clone.data.q_target, clone.data.v_target, clone.data.tau_ff = (self.data.q_target, self.data.v_target,
