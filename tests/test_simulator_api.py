@@ -92,6 +92,9 @@ def test_duration_shorter_than_a_step_is_refused():
     sim = Simulator("cube-slide")
     with pytest.raises(ValueError, match="shorter than one step"):
         sim.rollout(4e-4)
+    with pytest.raises(ValueError, match="shorter than one step"):  # half a step: it used to run 0 steps
+        sim.rollout(5e-4)
+    assert len(sim.rollout(6e-4).t) == 2  # rounds to one step
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ValueError, match="duration"):
             sim.rollout(bad)

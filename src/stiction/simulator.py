@@ -191,6 +191,9 @@ class Simulator:
             raise ValueError(f"warm_start must be True or False, got {warm!r}")
         s.warm_start = bool(warm)
         formulation = check_formulation(overrides.get("formulation", "exact"))
+        if formulation != "exact" and solver != "default":  # as stiction.solve: nothing would use it
+            raise ValueError(f"solver={solver!r} picks the exact law's algorithm; the {formulation} formulation "
+                             "has its own (drop the solver, or use formulation 'exact')")
         s.formulation = formulation
         fs = formulation_settings(formulation, {k: overrides[k] for k in FORMULATION_PARAMETERS if k in overrides})
         s.formulation_settings = fs
@@ -200,11 +203,6 @@ class Simulator:
         if "ode_tolerance" in overrides:
             s.ode_tolerance = _positive("ode_tolerance", overrides["ode_tolerance"])
         return s
-
-    @property
-    def settings(self) -> _ReadOnly:
-        """The settings the C++ model was built with (read-only)."""
-        return _ReadOnly(self.model.settings)
 
     @property
     def data(self) -> _core.SimulatorData:
@@ -217,6 +215,11 @@ class Simulator:
         raise AttributeError("Simulator.data cannot be replaced (views of its control arrays would be left "
                              "pointing at the old one); set the state with set_state(q, v, t), the control "
                              "through sim.data.tau_ff etc., or reset()")
+
+    @property
+    def settings(self) -> _ReadOnly:
+        """The settings the C++ model was built with (read-only)."""
+        return _ReadOnly(self.model.settings)
 
     @property
     def dt(self) -> float:
@@ -260,7 +263,8 @@ class Simulator:
         """Simulate `duration` seconds (default: the scene's, or the `duration` override) from the
         current state. The loop runs in C++ unless a `callback(simulator)` is given, which then
         runs before every step (e.g. to set data.tau_ff or data.q_target). A duration shorter
-        than one step is refused; otherwise round(duration / dt) steps are taken."""
+        than one step is refused (one that rounds to 0 steps too: 0.5 dt rounds to 0); otherwise
+        round(duration / dt) steps are taken."""
         duration = self.duration if duration is None else _positive("duration", duration)
         if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
             raise ValueError(f"record_every must be an integer >= 1, got {record_every!r}")
@@ -270,7 +274,7 @@ class Simulator:
         if settings.mode == _core.IntegrationMode.adaptive:
             return self._rollout_adaptive(duration, callback)
         steps = duration / settings.dt
-        if steps < 0.5:
+        if round(steps) < 1:  # (not steps < 0.5: Python rounds 0.5 to 0, which ran 0 steps)
             raise ValueError(f"duration {duration:g} s is shorter than one step (dt = {settings.dt:g} s)")
         if steps > MAX_STEPS:
             raise ValueError(f"duration {duration:g} s at dt = {settings.dt:g} s is {steps:.3g} steps, more than "
@@ -363,11 +367,15 @@ class Simulator:
         return out
 
     def summary(self, traj: Trajectory) -> dict:
-        """The numbers `stiction simulate --json` prints."""
+        """The numbers `stiction simulate --json` prints. The drift, slip and acceleration measures
+        are taken over the records from the scene's settle_time on: a trajectory that does not go
+        past settle_time is refused (ValueError) rather than reported as 0 drift."""
         sc = self.scene
         after = traj.t >= sc.settle_time - 1e-12
-        if not after.any():
-            after[-1] = True
+        if after.sum() < 2:
+            raise ValueError(f"settle_time = {sc.settle_time:g} s (scene {sc.name!r}): the trajectory ends at t = "
+                             f"{traj.t[-1]:g} s, with no record after settling to measure drift and slip on; "
+                             "simulate longer than settle_time")
         free = sc.model.njoints > 1 and sc.model.joints[1].shortname() == "JointModelFreeFlyer"
         base = traj.q[:, :3] if free else np.zeros((len(traj.t), 3))
         i0 = int(np.argmax(after))
