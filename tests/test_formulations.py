@@ -244,6 +244,18 @@ def test_penalty_single_contact_is_the_closed_form_of_relation_4():
     assert pn > 0
 
 
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+def test_non_finite_position_error_is_refused(bad):
+    """A NaN gap is a wrong input, not a position: stiction.solve and Formulation.solve refuse it."""
+    p, m, h, mu = point_mass_problem((0.2, 0.0))
+    psi = np.array([0.0, 0.0, bad])
+    with pytest.raises(ValueError, match="solve: position_error has NaN or infinite entries"):
+        stiction.solve(p, formulation="penalty", h=h, position_error=psi)
+    f = _core.Formulation("penalty", _core.FormulationSettings())
+    with pytest.raises(ValueError, match="Formulation.solve: position_error has NaN or infinite entries"):
+        f.solve(p, _core.SolverSettings(), None, h, psi)
+
+
 # ---- the simulator and the CLI ------------------------------------------------------------------
 
 @pytest.mark.parametrize("name", ALTERNATIVES)
@@ -253,3 +265,11 @@ def test_every_formulation_runs_the_sliding_cube_and_says_so(name, capsys):
     assert summary["formulation"] == name
     assert summary["steps"] == 50
     assert code == (0 if summary["all_converged"] else 1)
+
+
+def test_cli_refuses_a_solver_the_formulation_does_not_use(capsys):
+    """--solver picks the exact law's algorithm: with another formulation it is refused (exit 2), as
+    stiction.solve refuses it, instead of being ignored."""
+    code = main(["simulate", "cube-slide", "--formulation", "ccp", "--solver", "nsgs", "--duration", "0.01"])
+    err = capsys.readouterr().err
+    assert code == 2 and "solver='nsgs'" in err and "ccp" in err and len(err.strip().splitlines()) == 1

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from . import fclib, formulation_infos, formulation_names, solver_names, solve
 from ._optional import MissingExtraError, require
+from ._validation import positive_int as _positive_int
 
 from .resources import DEMO_FCLIB_PROBLEMS as DEMO_PROBLEMS  # one per family that shows something
 from .resources import fclib_dir
@@ -371,16 +372,6 @@ def _finite(kind: str):
         return x
 
     return parse
-
-
-def _positive_int(text: str) -> int:
-    try:
-        x = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if x < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: must be >= 1")
-    return x
 
 
 def _version() -> str:

@@ -23,12 +23,14 @@ import numpy as np
 import pinocchio as pin
 
 from . import _core
+from ._validation import vector
 from .resources import robots_dir as bundled_robots_dir
 from .resources import scenes_dir
 from .robots import load_robot, load_urdf, robot_package_dirs
 from .scene_schema import SceneError, did_you_mean, validate_scene
 
 GRAVITY = 9.81
+OVERLAP_TOLERANCE = 1e-9  # m: two [[objects]] boxes may touch (a face on a face), not interpenetrate
 
 
 def __getattr__(name: str):
@@ -286,14 +288,23 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
     if cfg["objects"]:  # appended in place: to copies (the robot's models stay as loaded)
         model = model.copy()
         visual = visual.copy() if visual is not None else pin.GeometryModel()
+    placed = []  # (index, centre, half extents) of the objects so far
     for k, obj in enumerate(cfg["objects"]):
         model, visual, frame, half = _append_box(model, visual, obj["urdf"], obj["name"], base_dir,
                                                  f"objects[{k}].urdf", cache)
+        centre = np.array([obj["xy"][0], obj["xy"][1], float(half[2]) + obj["z"]])
+        for j, other, other_half in placed:
+            # axis-aligned boxes (q0 holds the identity rotation) overlap when they do along every axis
+            depth = float(np.min(half + other_half - np.abs(centre - other)))
+            if depth > OVERLAP_TOLERANCE:
+                raise SceneError(f"objects[{k}] ({obj['name']!r}) overlaps objects[{j}] "
+                                 f"({cfg['objects'][j]['name']!r}) by {depth:.3g} m: move its xy or z")
+        placed.append((k, centre, half))
         object_frames[obj["name"]] = frame
         obj_mu = mu if obj["mu"] is None else obj["mu"]
         for c, corner in enumerate(_corners(half, z_sign=-1)):
             contacts.append(_sphere(f"{obj['name']}-corner{c}", frame, corner, 0.0, 0, obj_mu, cmodel))
-        q0 = np.concatenate([q0, [obj["xy"][0], obj["xy"][1], float(half[2]) + obj["z"], 0.0, 0.0, 0.0, 1.0]])
+        q0 = np.concatenate([q0, [*centre, 0.0, 0.0, 0.0, 1.0]])
 
     for w, wall in enumerate(cfg["walls"]):
         name = wall["name"] or f"wall{len(halfspaces)}"
@@ -614,9 +625,7 @@ def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = 
     if q0 is None:
         q = pin.neutral(model)
     else:
-        from .simulator import _vector
-
-        q = _quaternion_check(model, _vector("q0", q0, model.nq), "q0", strict=False)
+        q = _quaternion_check(model, vector("q0", q0, model.nq), "q0", strict=False)
     contacts = []
     for k, spec in enumerate(spheres):
         if isinstance(spec, (str, bytes)) or not hasattr(spec, "__len__") or len(spec) not in (2, 3):
@@ -785,8 +794,6 @@ def _pile_bodies(paths: list[str], count: int, spacing: float | None, seed: int,
     if count > PILE_MAX_BODIES:
         raise SceneError(f"array.count = {count}: a pile holds at most {PILE_MAX_BODIES} bodies (its broad phase "
                          "checks every pair)")
-    if cmodel == "planar":
-        raise SceneError("contacts.model = \"planar\": a pile is three-dimensional (spatial or frictionless)")
     rng = np.random.default_rng(seed)
     model, visual, geometry = pin.Model(), pin.GeometryModel(), pin.GeometryModel()
     cache: dict = {}

@@ -68,8 +68,8 @@ class Table:
 _VEC3 = dict(kind="vector", length=3)
 
 CONTACT_MODELS = ("spatial", "planar", "frictionless")
-_MODEL_DOC = ("contact model: spatial (3 rows t1, t2, n), planar (2 rows t1, n: planar scenes) or frictionless "
-              "(1 unilateral row n); mu = 0 uses the 1 row automatically")
+_MODEL_DOC = ("contact model: spatial (3 rows t1, t2, n), planar (2 rows t1, n: `joint = \"planar\"` scenes only) or "
+              "frictionless (1 unilateral row n); mu = 0 uses the 1 row automatically")
 
 GROUND = Table("ground", "The ground plane z = 0; a slope tilts gravity (downhill = +x).", (
     Key("slope_deg", "float", "slope angle in degrees (gravity tilted about y)", 0.0, low=-89.0, high=89.0),
@@ -140,7 +140,8 @@ OBJECTS = Table("objects", "Free boxes added to a `robot` or `urdf` scene, each 
     Key("name", "str", "the box's name (its frames are suffixed with it; `walls.body` refers to it)",
         required=True),
     Key("urdf", "str", "a box URDF (relative: to the scene file's folder, then the bundled robots)", "cube.urdf"),
-    Key("xy", "vector", "centre x, y in the world (the box rests on the ground)", required=True, length=2),
+    Key("xy", "vector", "centre x, y in the world (the box rests on the ground; boxes may touch, not overlap)",
+        required=True, length=2),
     Key("z", "float", "height in m of the box's bottom above the ground (0: it rests on it; above: held by the "
         "robot, e.g. between two pads, or falling)", 0.0, low=0.0),
     Key("mu", "float", "friction coefficient of its corners on the ground (default: [ground] mu)", low=0.0),
@@ -203,7 +204,8 @@ SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `bodies` or `[a
     Key("bodies", "strings", "free-flying URDF boxes stacked in the listed order", nonempty=True),
     Key("duration", "float", "seconds simulated by default", 2.0, low=0.0, low_open=True),
     Key("dt", "float", "time step in s", 1e-3, low=0.0, low_open=True),
-    Key("settle_time", "float", "seconds excluded from the drift and slip measures", 0.0, low=0.0),
+    Key("settle_time", "float", "seconds excluded from the drift and slip measures (shorter than `duration`)", 0.0,
+        low=0.0),
     Key("mode", "str", "integration: time stepping (eq. 70) or the relaxed DAI as an ODE (eq. 64)", "timestep",
         choices=("timestep", "rk4", "ode", "adaptive")),
     Key("delta", "float", "ODE modes: Baumgarte delta in s (0: dt)", 0.0, low=0.0),
@@ -362,6 +364,16 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
         names = [o["name"] for o in out["objects"]]
         if len(set(names)) != len(names):
             raise SceneError(f"objects: names must be unique, got {names}")
+        if out["settle_time"] >= out["duration"]:
+            raise SceneError(f"settle_time = {out['settle_time']:g} must be shorter than duration = "
+                             f"{out['duration']:g} (drift and slip are measured after settling)")
+        planar_root = out["joint"] == "planar"
+        for label, model in [("contacts.model", out["contacts"]["model"])] + \
+                [(f"walls[{i}].model", w["model"]) for i, w in enumerate(out["walls"])]:
+            if model == "planar" and not planar_root:
+                raise SceneError(f"{label} = \"planar\": planar contacts (rows t1, n: no friction across the "
+                                 "plane) need a planar scene (joint = \"planar\"); this scene moves in 3-D: use "
+                                 "spatial")
         if out["mode"] == "timestep" and "delta" in cfg:
             raise SceneError("delta applies to the ODE modes (mode = rk4, ode or adaptive) only")
         if "joint" in cfg and "free_flyer" in cfg and (out["joint"] == "free_flyer") != out["free_flyer"]:

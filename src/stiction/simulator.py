@@ -12,7 +12,9 @@ import numpy as np
 import pinocchio as pin
 
 from . import _core
-from .scene import Scene, load_scene
+from ._validation import positive as _positive
+from ._validation import vector as _vector
+from .scene import Scene, _quaternion_check, load_scene
 from .formulations import PARAMETERS as FORMULATION_PARAMETERS
 from .formulations import check_name as check_formulation
 from .formulations import settings_for as formulation_settings
@@ -98,15 +100,6 @@ MAX_RECORD_BYTES = 4e9  # a trajectory larger than this is refused before simula
 MAX_STEPS = 1e9  # steps in one rollout (a C++ int counts them; a typo'd dt must not hang or overflow)
 
 
-def _positive(name: str, value, allow_zero: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise TypeError(f"{name} must be a number, got {type(value).__name__} {value!r}")
-    x = float(value)
-    if not math.isfinite(x) or x < 0 or (x == 0 and not allow_zero):
-        raise ValueError(f"{name} must be a finite number {'>=' if allow_zero else '>'} 0, got {value!r}")
-    return x
-
-
 class _ReadOnly:
     """A read-only view of the C++ settings: they are fixed when the Simulator is built (the
     model is immutable), so assigning to them is an error instead of a silent no-op."""
@@ -137,11 +130,15 @@ class Simulator:
     With another formulation than exact, ``converged`` (per step) is the formulation's own
     stopping test and ``residual`` stays the exact law's, the same yardstick for all.
 
-    State: ``sim.data.q``, ``.v``, ``.t`` and the control vectors (``kp``, ``kd``, ``q_target``,
-    ``v_target``, ``tau_ff``) read as *copies* (numpy arrays detached from the simulator: changing
-    an entry of one changes nothing); assigning a whole array sets it (size and finiteness are
-    checked). The supported way to set the state is :meth:`set_state`, which also normalises
-    quaternions; :meth:`reset` returns to the scene's initial state.
+    Control: ``sim.data.kp``, ``.kd``, ``.q_target``, ``.v_target``, ``.tau_ff`` read as numpy
+    *views* on the simulator's data: ``sim.data.tau_ff[:] = u`` (or ``[i] = x``) takes effect at the
+    next step, as does assigning a whole array (``sim.data.tau_ff = u``: shape, dtype and
+    finiteness checked). State and outputs: ``sim.data.q``, ``.v`` and every array the last step
+    left (``A``, ``b``, ``gaps``, ``candidate_lambda``, ...) read as *read-only copies*: writing
+    into one raises. The supported way to set the state is :meth:`set_state`, which also
+    normalises quaternions; :meth:`reset` returns to the scene's initial state and control (into
+    the same data: views taken before stay valid). ``sim.data`` is the same object for the
+    simulator's life (it cannot be replaced).
     """
 
     def __init__(self, scene: Scene | str | os.PathLike, **overrides):
@@ -163,7 +160,7 @@ class Simulator:
         settings = self._settings_from(sc, overrides)
         self.model = _core.SimulatorModel(sc.model, sc.halfspaces, sc.contacts, sc.anchors, settings,
                                           sc.geometry, sc.pairs)
-        self.data = _core.SimulatorData(self.model)
+        self._data = _core.SimulatorData(self.model)
         self.reset()
 
     @staticmethod
@@ -194,6 +191,9 @@ class Simulator:
             raise ValueError(f"warm_start must be True or False, got {warm!r}")
         s.warm_start = bool(warm)
         formulation = check_formulation(overrides.get("formulation", "exact"))
+        if formulation != "exact" and solver != "default":  # as stiction.solve: nothing would use it
+            raise ValueError(f"solver={solver!r} picks the exact law's algorithm; the {formulation} formulation "
+                             "has its own (drop the solver, or use formulation 'exact')")
         s.formulation = formulation
         fs = formulation_settings(formulation, {k: overrides[k] for k in FORMULATION_PARAMETERS if k in overrides})
         s.formulation_settings = fs
@@ -203,6 +203,18 @@ class Simulator:
         if "ode_tolerance" in overrides:
             s.ode_tolerance = _positive("ode_tolerance", overrides["ode_tolerance"])
         return s
+
+    @property
+    def data(self) -> _core.SimulatorData:
+        """The state, control and last step's outputs (one object for the simulator's life, so the
+        control views taken from it stay bound to this simulator)."""
+        return self._data
+
+    @data.setter
+    def data(self, value) -> None:
+        raise AttributeError("Simulator.data cannot be replaced (views of its control arrays would be left "
+                             "pointing at the old one); set the state with set_state(q, v, t), the control "
+                             "through sim.data.tau_ff etc., or reset()")
 
     @property
     def settings(self) -> _ReadOnly:
@@ -223,10 +235,12 @@ class Simulator:
         return names
 
     def reset(self) -> None:
-        """Back to the scene's initial state, time 0 and control."""
+        """Back to the scene's initial state, time 0 and control (v_target 0). Written into the
+        same data: views of the control arrays stay valid and show the scene's values."""
         sc, d = self.scene, self.data
         d.q, d.v, d.t = sc.q0, sc.v0, 0.0
         d.kp, d.kd, d.q_target, d.tau_ff = sc.kp, sc.kd, sc.q_target, sc.tau_ff
+        d.v_target = np.zeros(sc.model.nv)
 
     def set_state(self, q=None, v=None, t: float | None = None) -> None:
         """Set the configuration q (nq), velocity v (nv) and/or time t. Arrays are checked for
@@ -249,7 +263,8 @@ class Simulator:
         """Simulate `duration` seconds (default: the scene's, or the `duration` override) from the
         current state. The loop runs in C++ unless a `callback(simulator)` is given, which then
         runs before every step (e.g. to set data.tau_ff or data.q_target). A duration shorter
-        than one step is refused; otherwise round(duration / dt) steps are taken."""
+        than one step is refused (one that rounds to 0 steps too: 0.5 dt rounds to 0); otherwise
+        round(duration / dt) steps are taken."""
         duration = self.duration if duration is None else _positive("duration", duration)
         if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
             raise ValueError(f"record_every must be an integer >= 1, got {record_every!r}")
@@ -259,7 +274,7 @@ class Simulator:
         if settings.mode == _core.IntegrationMode.adaptive:
             return self._rollout_adaptive(duration, callback)
         steps = duration / settings.dt
-        if steps < 0.5:
+        if round(steps) < 1:  # (not steps < 0.5: Python rounds 0.5 to 0, which ran 0 steps)
             raise ValueError(f"duration {duration:g} s is shorter than one step (dt = {settings.dt:g} s)")
         if steps > MAX_STEPS:
             raise ValueError(f"duration {duration:g} s at dt = {settings.dt:g} s is {steps:.3g} steps, more than "
@@ -324,7 +339,7 @@ class Simulator:
                 raise TypeError(f"batch_rollout: states[{k}] must be a (q, v) pair") from None
             clone = Simulator.__new__(Simulator)
             clone.scene, clone.duration, clone.model = self.scene, self.duration, self.model
-            clone.data = _core.SimulatorData(self.model)
+            clone._data = _core.SimulatorData(self.model)
             clone.data.q, clone.data.v, clone.data.t = self.data.q, self.data.v, self.data.t
             clone.data.kp, clone.data.kd = self.data.kp, self.data.kd
             clone.data.q_target, clone.data.v_target, clone.data.tau_ff = (self.data.q_target, self.data.v_target,
@@ -352,11 +367,15 @@ class Simulator:
         return out
 
     def summary(self, traj: Trajectory) -> dict:
-        """The numbers `stiction simulate --json` prints."""
+        """The numbers `stiction simulate --json` prints. The drift, slip and acceleration measures
+        are taken over the records from the scene's settle_time on: a trajectory that does not go
+        past settle_time is refused (ValueError) rather than reported as 0 drift."""
         sc = self.scene
         after = traj.t >= sc.settle_time - 1e-12
-        if not after.any():
-            after[-1] = True
+        if after.sum() < 2:
+            raise ValueError(f"settle_time = {sc.settle_time:g} s (scene {sc.name!r}): the trajectory ends at t = "
+                             f"{traj.t[-1]:g} s, with no record after settling to measure drift and slip on; "
+                             "simulate longer than settle_time")
         free = sc.model.njoints > 1 and sc.model.joints[1].shortname() == "JointModelFreeFlyer"
         base = traj.q[:, :3] if free else np.zeros((len(traj.t), 3))
         i0 = int(np.argmax(after))
@@ -440,23 +459,7 @@ class Simulator:
         return out
 
 
-def _vector(name: str, x, n: int) -> np.ndarray:
-    if x is None or isinstance(x, (str, bytes)):
-        raise TypeError(f"{name} must be an array of {n} numbers, got {type(x).__name__}")
-    a = np.asarray(x)
-    if a.dtype.kind not in "biuf":
-        raise TypeError(f"{name} must be an array of {n} real numbers, got dtype {a.dtype}")
-    a = a.astype(np.float64).reshape(-1) if a.ndim <= 1 else a
-    if a.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},), got {np.shape(x)}")
-    if not np.isfinite(a).all():
-        raise ValueError(f"{name} has NaN or infinite entries")
-    return a
-
-
 def _normalized_configuration(model, q: np.ndarray) -> np.ndarray:
-    from .scene import _quaternion_check
-
     return _quaternion_check(model, q, "q", strict=False)
 
 

@@ -39,20 +39,19 @@ from types import ModuleType
 from typing import Any, Callable, Iterable, Iterator
 
 from .._optional import require
+from .._validation import positive_int
 
 COMMON_OPTIONS = ("json", "out", "quick", "cluster", "workers")
 
 
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
-    from ..cli import _positive_int  # the CLI's own integer check (called when the CLI builds its parser)
-
     parser.add_argument("--json", action="store_true", help='print {"command", "stamp", "rows", ...} as JSON')
     parser.add_argument("--out", metavar="DIR", help="write DIR/NAME.csv (resumable: cases already there are "
                         "skipped), DIR/NAME.json and the PNG charts")
     parser.add_argument("--quick", action="store_true", help="a small version (two points per sweep)")
     parser.add_argument("--cluster", metavar="ADDRESS", help="run the cases on a Dask distributed cluster: its "
                         "scheduler address, or 'local' for a LocalCluster on this machine (extra: cluster)")
-    parser.add_argument("--workers", type=_positive_int, metavar="N",
+    parser.add_argument("--workers", type=positive_int, metavar="N",
                         help="local worker processes (default: the bench's; one per core for most)")
 
 
