@@ -355,7 +355,7 @@ def _rotations(quat: np.ndarray) -> np.ndarray:
 
 def energy_gain(energy) -> float:
     """The largest rise of the total energy (kinetic + potential) over its initial value, relative
-    to |E0| (absolute when E0 = 0): the energy-gain mode fires above ENERGY_GAIN_LIMIT."""
+    to ``abs(E0)`` (absolute when E0 = 0): the energy-gain mode fires above ENERGY_GAIN_LIMIT."""
     energy = np.asarray(energy, dtype=float)
     e0 = energy[0]
     return float((energy.max() - e0) / abs(e0)) if e0 != 0 else float(energy.max() - e0)
