@@ -361,3 +361,19 @@ def test_each_threshold_of_classify(criterion, field, past, inside):
            "drift": None, "drift_limit": None, "accel_error": None, "direction_error_deg": None, "tilt_deg": 0.0}
     assert st.classify({**row, field: past}) == [criterion]
     assert st.classify({**row, field: inside}) == []
+
+
+@pytest.mark.parametrize("shift,fires", [(0.0505, True), (0.0495, False)])
+def test_structure_lost_fires_when_the_top_cube_leaves_half_a_width(shift, fires):
+    """The two-cube stack: the top cube's centre `shift` m sideways of the bottom one's (half the
+    10 cm width is the limit); nothing else moves or tilts."""
+    import types
+
+    sc = st.stack_scene(1.0, False)
+    t = np.linspace(0.0, 1.0, 11)
+    q = np.tile(sc.q0, (11, 1)).astype(float)
+    q[:, 7] += shift * t  # body 1 (the top cube): x of its free flyer
+    traj = types.SimpleNamespace(t=t, q=q, v=np.zeros((11, sc.model.nv)))
+    fails, meas = _failures(sc, traj, {"stacked": True})
+    assert meas["tilt_deg"] < 1e-9
+    assert ("structure-lost" in fails) == fires, fails
