@@ -295,7 +295,7 @@ def cmd_bench_all(args) -> int:
     from .bench import ALL_RUNS
 
     common = ["--out", args.out] + (["--quick"] if args.quick else [])
-    common += ["--cluster", args.cluster] if args.cluster else []
+    common += ["--cluster", args.cluster] if args.cluster is not None else []  # "" is refused by each bench
     common += ["--workers", str(args.workers)] if args.workers else []
     results = []
     for run in ALL_RUNS:
