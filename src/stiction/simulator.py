@@ -399,13 +399,17 @@ class Simulator:
                 d = np.linalg.norm(traj.q[after][:, iq:iq + 3] - traj.q[i0, iq:iq + 3], axis=1).max()
                 body_drift = max(body_drift, float(d))
         tim = np.median(traj.timings[1:], axis=0) if len(traj.t) > 1 else np.zeros(5)
+        # steps taken, not records: rollout(record_every=k) records every k-th step, each record
+        # with the step dt that led to it (the adaptive mode records every step)
+        steps = int(np.rint(np.diff(traj.t) / traj.dt[1:]).sum()) if len(traj.t) > 1 else 0
         out = {
             "scene": sc.name,
             "mode": {0: "timestep", 1: "rk4", 2: "adaptive"}[int(self.settings.mode)],
             "formulation": self.settings.formulation,
             "dt": self.settings.dt,
             "duration": float(traj.t[-1] - traj.t[0]),
-            "steps": int(len(traj.t) - 1),
+            "steps": steps,
+            "recorded_steps": int(len(traj.t) - 1),  # the convergence keys count these
             "contacts": len(sc.contacts),
             "max_body_drift": body_drift,
             "us_per_step": float(tim[4]),
@@ -477,7 +481,9 @@ def _warnings(summary: dict) -> list[str]:
         out.append(f"max penetration {summary['max_penetration']:.3g} m exceeds {PENETRATION_WARNING:g} m: the step "
                    f"dt = {summary['dt']:g} s is too coarse for the impact speeds (contacts are detected once per step)")
     if not summary["all_converged"]:
-        out.append(f"{summary['unconverged_steps']} of {summary['steps']} steps did not solve the contact problem "
+        of = f"{summary['steps']}" if summary["recorded_steps"] == summary["steps"] else \
+            f"the {summary['recorded_steps']} recorded (of {summary['steps']})"
+        out.append(f"{summary['unconverged_steps']} of {of} steps did not solve the contact problem "
                    f"to the tolerance (first at t = {summary['first_unconverged_t']:.6g} s)")
     return out
 
