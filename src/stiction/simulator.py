@@ -419,13 +419,17 @@ class Simulator:
                 body_drift = max(body_drift, float(d))
         base_speed, base_sway, settled = _rest_measures(sc.model, traj)
         tim = np.median(traj.timings[1:], axis=0) if len(traj.t) > 1 else np.zeros(5)
+        # steps taken, not records: rollout(record_every=k) records every k-th step, each record
+        # with the step dt that led to it (the adaptive mode records every step)
+        steps = int(np.rint(np.diff(traj.t) / traj.dt[1:]).sum()) if len(traj.t) > 1 else 0
         out = {
             "scene": sc.name,
             "mode": {0: "timestep", 1: "rk4", 2: "adaptive"}[int(self.settings.mode)],
             "formulation": self.settings.formulation,
             "dt": self.settings.dt,
             "duration": float(traj.t[-1] - traj.t[0]),
-            "steps": int(len(traj.t) - 1),
+            "steps": steps,
+            "recorded_steps": int(len(traj.t) - 1),  # the convergence keys count these
             "contacts": len(sc.contacts),
             "max_body_drift": body_drift,
             "us_per_step": float(tim[4]),
@@ -532,7 +536,9 @@ def _warnings(summary: dict, swaying: bool = False) -> list[str]:
                    f"and swayed {summary['final_base_sway']:.3g} m over the final {SETTLED_WINDOW:g} s (settled: "
                    f"< {SETTLED_SPEED:g} m/s and < {SETTLED_SWAY:g} m) while its contacts stick")
     if not summary["all_converged"]:
-        out.append(f"{summary['unconverged_steps']} of {summary['steps']} steps did not solve the contact problem "
+        of = f"{summary['steps']}" if summary["recorded_steps"] == summary["steps"] else \
+            f"the {summary['recorded_steps']} recorded (of {summary['steps']})"
+        out.append(f"{summary['unconverged_steps']} of {of} steps did not solve the contact problem "
                    f"to the tolerance (first at t = {summary['first_unconverged_t']:.6g} s)")
     return out
 
