@@ -7,7 +7,7 @@ scene, mode, formulation, dt, duration, steps, recorded_steps, contacts, max_bod
 max_penetration, max_residual, all_converged, unconverged_steps, first_unconverged_t, settle_time,
 base_drift, max_normal_velocity_while_sliding, mean_acceleration_along_slope,
 expected_sliding_acceleration, max_foot_slip, max_foot_displacement, rows_per_contact, contact_rows,
-warnings.
+warnings; final_base_speed, final_base_sway and settled are covered by tests/test_standing.py.
 
 Record 0 (the initial state, not a step) is left out of every per-step reference here."""
 import dataclasses
@@ -26,7 +26,8 @@ KEYS = {"scene", "mode", "formulation", "dt", "duration", "steps", "recorded_ste
         "us_per_phase", "max_penetration", "max_residual", "all_converged", "unconverged_steps",
         "first_unconverged_t", "settle_time", "base_drift", "max_normal_velocity_while_sliding",
         "mean_acceleration_along_slope", "expected_sliding_acceleration", "max_foot_slip", "max_foot_displacement",
-        "rows_per_contact", "contact_rows", "warnings"}
+        "rows_per_contact", "contact_rows", "warnings",
+        "final_base_speed", "final_base_sway", "settled"}  # the last three: tests/test_standing.py
 CLOSED_GAP = 1e-4  # [m] the summary's "stays closed" (its docstring: gaps <= 1e-4 m after settling)
 
 
@@ -248,13 +249,14 @@ def test_mean_acceleration_along_slope_is_the_fit_of_the_world_velocity(uphill):
 
 def test_expected_sliding_acceleration_from_the_scene_file():
     """g (sin th - mu cos th) from the TOML's slope and mu when positive, else 0; g sin th when
-    every contact is frictionless (mu = 0)."""
+    every contact is frictionless (mu = 0). (0.15 s: past the scenes' settle_time of 0.1 s, which
+    summary requires.)"""
     for name in ("cube-incline-slip", "cube-incline-stick", "cube-slide"):
         with open(SCENES_DIR / f"{name}.toml", "rb") as f:
             ground = tomllib.load(f)["ground"]
         th, mu = math.radians(ground.get("slope_deg", 0.0)), ground["mu"]
         sim = Simulator(name)
-        s = sim.summary(sim.rollout(0.01))
+        s = sim.summary(sim.rollout(0.15))
         assert s["expected_sliding_acceleration"] == pytest.approx(max(0.0, G * (math.sin(th) - mu * math.cos(th))),
                                                                    rel=1e-12, abs=1e-15)
     with open(SCENES_DIR / "cube-incline-slip.toml", "rb") as f:
@@ -262,10 +264,10 @@ def test_expected_sliding_acceleration_from_the_scene_file():
     cfg["contacts"]["model"] = "frictionless"  # the ground's mu stays 0.5; the contacts have none
     sim = Simulator(build_scene(cfg, base_dir=SCENES_DIR))
     assert sim.scene.mu == 0.5
-    s = sim.summary(sim.rollout(0.01))
+    s = sim.summary(sim.rollout(0.15))
     assert s["expected_sliding_acceleration"] == pytest.approx(G * 0.5, rel=1e-12)
     slip = Simulator("cube-incline-slip")
-    assert slip.summary(slip.rollout(0.01))["expected_sliding_acceleration"] == pytest.approx(
+    assert slip.summary(slip.rollout(0.15))["expected_sliding_acceleration"] == pytest.approx(
         G * (0.5 - 0.5 * math.cos(math.radians(30))), rel=1e-12)
 
 
