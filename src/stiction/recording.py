@@ -201,7 +201,7 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
     at the contact point and its force: an arrow from the contact point along the force the
     ground exerts (traj.lam in the half-space frame), green while the contact sticks, red
     while it slips, blue while a bilateral contact is closed (state 3; only if it occurs),
-    nothing while it is open. Exactly one arrow (the state's own) is visible per closed
+    nothing while it is open or before the first step (record 0: state -1, no force yet). Exactly one arrow (the state's own) is visible per closed
     contact. The arrow's shaft is `|force| / force_scale` long (metres); the cone at its
     tip has a fixed size and is not part of that length. Arrow position, direction and
     length are keyed per frame and interpolate linearly between frames; visibility is
