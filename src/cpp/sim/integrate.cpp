@@ -110,11 +110,12 @@ void integrateTimeStep(const SimulatorModel& sim, SimulatorData& sd, double h) {
 // an increment in the Lie algebra from the step's start q0, and a stage's rate is not its velocity
 // V_s but k_s = dexp^-1_{-Theta_s}(V_s): q = q0 exp(Theta) with body velocity V = q^-1 q' gives
 // Theta' = V + 1/2 [Theta, V] + 1/12 [Theta, [Theta, V]] + O(Theta^4) (the Bernoulli series with
-// ad_{-Theta}; truncated after the terms an order-4 method needs, Munthe-Kaas 1999 Thm. 1: q - 2).
+// ad_{-Theta}, B_3 = 0; an order-p method needs the terms up to ad^(p-2), Munthe-Kaas 1999, so RK4
+// all of these and the 3(2) pair the first two).
 // Combining the velocities themselves (as before) is exact only where the group commutes (revolute
 // and prismatic joints): on a free flyer it left an O(h^3) error per step, order 2 overall
-// (measured on a tumbling free rod: 2.00, on the anchored rod 3.1; now 4.0 and 3.0 for the 3(2)
-// pair, tests/test_ode_order.py).
+// (observed at dt = 4, 2, 1 ms: RK4 2.0 on a tumbling rod and Solo-12 in the air, 2.1-2.4 on the
+// anchored rod; Bogacki-Shampine 2.0; now 4.0 and 3.0: tests/test_ode_order.py, docs/simulator.md).
 
 namespace {
 
