@@ -31,6 +31,14 @@ def _rollout(model, data, n_steps: int, every: int = 1) -> dict:
     return {k: (np.asarray(v).reshape(n) if k in _VECTOR_KEYS else np.asarray(v).reshape(n, -1))
             for k, v in rec.items()}
 PHASES = ("kinematics", "delassus", "solve", "integrate", "total")
+NO_STATE = -1  # Trajectory.states of record 0: no solve classified the contacts
+
+
+def _states(recorded: np.ndarray) -> np.ndarray:
+    """The recorded contact states as int8, NaN (record 0: no solve yet) as NO_STATE."""
+    s = np.asarray(recorded)
+    return np.where(np.isnan(s), NO_STATE, s).astype(np.int8)
+
 
 
 @dataclass
@@ -38,12 +46,22 @@ class Trajectory:
     """A recorded rollout. Shapes: N records, nc candidate contacts.
 
     t (N,), q (N, nq), v (N, nv); lam (N, nc, 3) contact forces (t1, t2, n) in N;
-    contact_velocity (N, nc, 3) J v after each step; gaps (N, nc) signed distances;
+    contact_velocity (N, nc, 3) J v after each step; gaps (N, nc) signed distances (of the
+    configuration the step's contact problem was built at: the step's start in time stepping);
     states (N, nc) 0 open / 1 stick / 2 slip / 3 closed; residual (N,) the largest solver
     residual of the step; iterations (N,); converged (N,); dt (N,) the step taken;
     timings (N, 5) µs per phase: kinematics+collision, Delassus, solve, integrate, total;
     rows (N, nc) rows each contact used in the step (3 spatial, 2 planar, 1 frictionless or
     mu = 0, 0 inactive; None in files saved before it was recorded).
+
+    Record 0 is the state the rollout started from, before any step: its gaps are that state's
+    signed distances, its rows the rows each contact would have there, its contact_velocity
+    J v of that state (0 for candidates beyond the activation distance, as in every record);
+    no force acted and no solve classified the contacts, so lam[0] is NaN and states[0] is -1
+    (NO_STATE). residual, iterations, converged, dt and timings of record 0 are those of the
+    step before the rollout, if any (a fresh simulator's: 0, 0, True, 0, 0): read the steps'
+    from record 1 on. Files saved by earlier versions hold zeros in record 0's contact fields
+    (its gaps too).
     """
 
     scene: str
@@ -315,7 +333,7 @@ class Simulator:
         return Trajectory(
             scene=self.scene.name, contact_names=self.contact_names, t=rec["t"], q=rec["q"], v=rec["v"],
             lam=rec["lam"].reshape(n, nc, 3), contact_velocity=rec["contact_velocity"].reshape(n, nc, 3),
-            gaps=rec["gaps"].reshape(n, nc), states=rec["states"].astype(np.int8).reshape(n, nc),
+            gaps=rec["gaps"].reshape(n, nc), states=_states(rec["states"]).reshape(n, nc),
             residual=rec["residual"], iterations=rec["iterations"].astype(np.int32),
             converged=rec["converged"].astype(bool), dt=rec["dt"], timings=rec["timings"],
             rows=rec["rows"].astype(np.int8).reshape(n, nc))

@@ -28,6 +28,26 @@ void completeTangents(HalfSpace& h) {
   h.tangent2 = h.normal.cross(h.tangent1);  // (t1, t2, n) right-handed
 }
 
+// The joints among `joint` (a composite: its sub-joints) whose Lie group does not commute, as
+// pinocchio::integrate treats them: q (+) v = q exp(v) on SE(3), SE(2) and SO(3). Every other
+// kind integrates on R^n or SO(2) (revolute, prismatic, unbounded revolute, spherical ZYX,
+// translation, ...), whose bracket is zero.
+void collectNonAbelian(const pinocchio::JointModel& joint, std::vector<SimulatorModel::LieAlgebraJoint>& out) {
+  using Group = SimulatorModel::LieAlgebraJoint::Group;
+  const std::string kind = joint.shortname();
+  const int iv = joint.idx_v();
+  if (kind == "JointModelFreeFlyer") {
+    out.push_back({Group::kSE3, iv});
+  } else if (kind == "JointModelPlanar") {
+    out.push_back({Group::kSE2, iv});
+  } else if (kind == "JointModelSpherical") {
+    out.push_back({Group::kSO3, iv});
+  } else if (kind == "JointModelComposite") {
+    for (const pinocchio::JointModelVariant& sub : boost::get<pinocchio::JointModelComposite>(joint.toVariant()).joints)
+      collectNonAbelian(pinocchio::JointModel(sub), out);
+  }
+}
+
 // The world's subtrees (children of the universe) as separate models: joints copied in
 // order (a parent before its children), with their placements, inertias and armature.
 void splitIntoSystems(const pinocchio::Model& world, std::vector<SystemModel>& systems,
@@ -145,8 +165,10 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
     throw std::invalid_argument(
         "the penalty formulation integrates its springs by implicit Euler over the time step (Kikuuwe-Fujimoto, "
         "eq. 83-84): it needs mode 'timestep', not an ODE mode");
-  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j) {
     if (model.joints[j].shortname() == "JointModelFreeFlyer") free_flyers.push_back(j);
+    collectNonAbelian(model.joints[j], non_abelian_joints);
+  }
   tree = treeOf(model);
   splitIntoSystems(model, systems, joint_system, joint_local);
   slot_pair.assign(contacts.size(), -1);
