@@ -1,0 +1,28 @@
+// A small dense LU for Newton's systems (newton.hpp).
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace stiction {
+
+/// Dense LU with partial pivoting for Newton systems of up to a few dozen contacts: unblocked
+/// and allocation-free once sized, where Eigen's blocked PartialPivLU spends more on its set-up
+/// than on the arithmetic (measured: ~50k instructions for a 27 x 27 matrix, against ~12k).
+class SmallDenseLU {
+ public:
+  /// Up to this many rows. Measured on random spatial problems, whole Newton solves: 1.5x
+  /// faster than with Eigen's LU at 24-63 rows, 1.2x at 96-150, even at 192-240, 0.9x at 321.
+  static constexpr Eigen::Index kMaxRows = 192;
+  /// Factor `a` in place (P a = L U); `a` must outlive the solves.
+  void compute(Eigen::MatrixXd& a);
+  /// x <- a^{-1} x.
+  void solve(Eigen::VectorXd& x) const;
+
+ private:
+  std::vector<int> pivots_;
+  const Eigen::MatrixXd* factor_ = nullptr;
+};
+
+}  // namespace stiction
