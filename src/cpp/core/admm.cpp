@@ -1,11 +1,9 @@
 #include "stiction/admm.hpp"
 
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <vector>
 
-#include "stiction/clock.hpp"
 #include "stiction/cone.hpp"
 #include "stiction/verdict.hpp"
 
@@ -205,8 +203,7 @@ double AdmmSolver::largestEigenvalueEstimate(const ContactProblem& problem, int 
 int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max_iterations,
                     double tolerance, double time_limit, double initial_rho, bool resume,
                     std::string& message, double switch_after) {
-  using Clock = FastClock;  // the time-stamp counter (clock.hpp)
-  const auto start = Clock::now();
+  monitor_.startClock(time_limit);
   const Eigen::Index m = problem.numRows();
   const double scale = stoppingScale(problem);
   StoppingTest test(problem, tolerance);
@@ -238,8 +235,8 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
     imbalance_ = kImbalance;
     last_factor_ = 1.0;
     best_r_ = std::numeric_limits<double>::infinity();
-    window_.clear();
-    window_.push_back({0, best_r_});
+    monitor_.resetRate(kStallWindow);
+    monitor_.record(0, best_r_);
     total_iterations_ = 0;
   }
   message = "iteration limit reached";
@@ -292,19 +289,11 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
         // improve at all). The best, not the last: ADMM's residual wanders (rho and the
         // active set change) and plateaus for hundreds of iterations before dropping
         // (Capsules-i122: 1.6e-7 from iteration 440 to 880, then 1e-8 at 1040).
-        const int g = total_iterations_ + it + 1;  // since the start, over resumed runs
-        window_.push_back({g, best_r_});
-        while (window_.size() > 2 && window_[1].first <= g - kStallWindow) window_.pop_front();
-        if (window_.front().first <= g - kStallWindow) {
-          const double span = double(g - window_.front().first);
-          const double rate = std::pow(best_r_ / window_.front().second, 1.0 / span);
-          const double needed = rate < 1.0 ? std::log(tolerance / best_r_) / std::log(rate)
-                                           : std::numeric_limits<double>::infinity();
-          if (needed > switch_after) {
-            message = "stalled";
-            ++it;
-            break;
-          }
+        monitor_.record(total_iterations_ + it + 1, best_r_);  // since the start, over resumed runs
+        if (monitor_.stalled(tolerance, switch_after)) {
+          message = "stalled";
+          ++it;
+          break;
         }
       }
     }
@@ -326,7 +315,7 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
         since_rho_change_ = 0;
       }
     }
-    if (time_limit > 0.0 && std::chrono::duration<double>(Clock::now() - start).count() > time_limit) {
+    if (monitor_.outOfTime()) {
       message = "time limit reached";
       ++it;
       break;

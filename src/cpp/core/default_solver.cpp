@@ -114,7 +114,7 @@ class DefaultSolver::Cascade {
         // instead of 23; its Newton from there took 10-27 steps in builds that differ only in
         // rounding (3.3-8.2 ms, against 4.4); with 2m, 35 steps (10.4 ms).
         switch_after_(std::max(50.0, m_)) {
-    start_ = settings.time_limit > 0.0 ? Clock::now() : Clock::time_point{};  // (read for a limit only)
+    budget_clock_.startClock(settings.time_limit);  // (reads the clock for a limit only)
     s_.best_ = lam_;
     s_.initial_ = lam_;
     s_.u_ws_.resize(problem.numRows());
@@ -160,11 +160,8 @@ class DefaultSolver::Cascade {
 
   double secondsSince(Clock::time_point t) const { return std::chrono::duration<double>(Clock::now() - t).count(); }
   // Every stage gets what is left of the time limit (0 = none).
-  double remaining() const {
-    if (settings_.time_limit <= 0.0) return 0.0;
-    return std::max(1e-9, settings_.time_limit - secondsSince(start_));
-  }
-  bool outOfTime() const { return settings_.time_limit > 0.0 && secondsSince(start_) >= settings_.time_limit; }
+  double remaining() const { return budget_clock_.remaining(); }
+  bool outOfTime() const { return budget_clock_.outOfTime(); }
 
   double score(const Eigen::VectorXd& x) {
     problem_.delassus().multiply(x, s_.u_ws_);
@@ -422,7 +419,7 @@ class DefaultSolver::Cascade {
   const double tol_;
   const double m_;
   const double switch_after_;
-  Clock::time_point start_;
+  IterationMonitor budget_clock_;  // the time limit of the whole cascade
   std::string msg_, newton_msg_;
   int used_ = 0;
   double best_res_ = std::numeric_limits<double>::infinity();

@@ -3,13 +3,11 @@
 #include "stiction/newton.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <utility>
 
 #include "stiction/admm.hpp"
-#include "stiction/clock.hpp"
 #include "stiction/cone.hpp"
 
 namespace stiction {
@@ -362,8 +360,7 @@ void NewtonSolver::fillSparseJacobian(const ContactProblem& problem) {
 
 int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max_steps,
                       double tolerance, double time_limit, std::string& message) {
-  using Clock = FastClock;  // the time-stamp counter (clock.hpp)
-  const auto start = Clock::now();
+  monitor_.startClock(time_limit);
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
   const Eigen::Index m = problem.numRows();
@@ -393,7 +390,7 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
       message = outcome == StoppingTest::kConverged ? "converged" : kUnresolvableMessage;
       break;
     }
-    if (time_limit > 0.0 && std::chrono::duration<double>(Clock::now() - start).count() > time_limit) {
+    if (monitor_.outOfTime()) {
       message = "time limit reached";
       break;
     }

@@ -15,10 +15,9 @@
 #include <Eigen/SparseCore>
 #include <Eigen/SparseLU>
 
-#include <deque>
-#include <utility>
 #include <vector>
 
+#include "stiction/iteration_monitor.hpp"
 #include "stiction/solver.hpp"
 
 namespace stiction {
@@ -61,7 +60,7 @@ class AdmmSolver final : public ContactSolver {
   double imbalance_ = 10.0;    // primal/dual residual ratio that moves rho (large m: grows on reversals)
   double last_factor_ = 1.0;   // the last change of rho (its direction)
   double best_r_ = 0.0;        // best relative residual at z so far (the stall test's)
-  std::deque<std::pair<int, double>> window_;  // (iteration, best_r_) over the stall window
+  IterationMonitor monitor_;   // time limit; best_r_'s rate over the stall window (kept on resume)
   int total_iterations_ = 0;   // over resumed runs
   Eigen::VectorXd primal_;  // the unprojected iterate x
   Eigen::MatrixXd shifted_;

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "stiction/admm.hpp"
+#include "stiction/iteration_monitor.hpp"
 #include "stiction/newton.hpp"
 #include "stiction/nsgs.hpp"
 #include "stiction/solver.hpp"

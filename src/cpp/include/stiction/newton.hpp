@@ -15,6 +15,7 @@
 #include <Eigen/SparseLU>
 
 #include "stiction/dense_lu.hpp"
+#include "stiction/iteration_monitor.hpp"
 #include "stiction/solver.hpp"
 
 namespace stiction {
@@ -56,6 +57,7 @@ class NewtonSolver final : public ContactSolver {
   std::vector<double> block_G_, block_D_;
   Eigen::VectorXd column_;
   Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> sparse_lu_;
+  IterationMonitor monitor_;  // the time limit
 };
 
 }  // namespace stiction
