@@ -369,7 +369,7 @@ void exposeSolver() {
           "of sliding blocks.");
 
   // The default's size bound for trying sparse Newton first (tests/test_default_rule.py).
-  bp::scope().attr("DEFAULT_SPARSE_NEWTON_ENTRIES") = static_cast<long>(DefaultSolver::kSparseNewtonEntries);
+  bp::scope().attr("DEFAULT_SPARSE_NEWTON_ENTRIES") = static_cast<long>(kSparseNewtonEntries);
   bp::def("_default_plan", &defaultPlanOf,
           (bp::arg("rows"), bp::arg("sparse"), bp::arg("stored_entries"), bp::arg("warm_started"),
            bp::arg("sticking_guess"), bp::arg("has_budget") = true),

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "stiction/cone.hpp"
+#include "stiction/thresholds.hpp"
 #include "stiction/verdict.hpp"
 
 namespace stiction {
@@ -52,9 +53,9 @@ double coneNaturalMap(const ContactProblem& problem, const Eigen::Ref<const Eige
 
 namespace {
 
-// Above this many rows a factorization costs more than many iterations: the stopping test
-// (a product with A) runs every kCheckEvery iterations, and rho changes less often.
-constexpr Eigen::Index kLargeRows = 64;
+// Above kAdmmLargeRows rows (thresholds.hpp) a factorization costs more than many iterations:
+// the stopping test (a product with A) runs every kCheckEvery iterations, and rho changes less
+// often.
 constexpr int kCheckEvery = 4;
 // Residual balancing: rho moves when ADMM's primal and dual residuals differ by more than a
 // threshold (10), by the square root of their ratio (at most kMaxRhoStep either way); on a
@@ -68,8 +69,6 @@ constexpr int kCheckEvery = 4;
 constexpr double kMaxRhoStep = 25.0;
 constexpr double kImbalance = 10.0;
 constexpr int kStallWindow = 400;
-// A (above kLargeRows rows) with at most this fraction of nonzeros is factorized sparsely.
-constexpr double kSparseDensity = 0.1;
 
 // v += sign * E s(u): the De Saxce shift mu ||u_t|| on each normal row (eq. 76-77).
 void addDesaxce(const ContactProblem& problem, const Eigen::VectorXd& u, double sign, Eigen::VectorXd& v) {
@@ -86,12 +85,14 @@ void addDesaxce(const ContactProblem& problem, const Eigen::VectorXd& u, double 
 
 }  // namespace
 
-bool AdmmSolver::factorsSparsely(const ContactProblem& problem) {
+bool sparseEnough(const ContactProblem& problem, double density) {
   if (problem.delassus().sparse() != nullptr) return true;  // held sparse: always
   const Eigen::MatrixXd& A = problem.delassus().dense();
   const Eigen::Index m = A.rows();
-  return m > kLargeRows && double((A.array() != 0.0).count()) <= kSparseDensity * double(m) * double(m);
+  return m > kDenseFactorRows && double((A.array() != 0.0).count()) <= density * double(m) * double(m);
 }
+
+bool AdmmSolver::factorsSparsely(const ContactProblem& problem) { return sparseEnough(problem, kAdmmSparseDensity); }
 
 void AdmmSolver::prepareSparse(const ContactProblem& problem) {
   // A problem held sparse (SparseDelassus) is factorized sparsely whatever its size; a dense A
@@ -264,7 +265,7 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
     // The stopping test needs u at z, one product with A: as much as the rest of the
     // iteration (the two triangular solves) on a large problem, so there it runs every
     // kCheckEvery iterations (at most kCheckEvery - 1 iterations late).
-    if (m <= kLargeRows || (it + 1) % kCheckEvery == 0 || it + 1 == max_iterations) {
+    if (m <= kAdmmLargeRows || (it + 1) % kCheckEvery == 0 || it + 1 == max_iterations) {
       multiplyA(problem, z_, u_);
       u_ -= problem.b();
       const double map = desaxce_ ? naturalMapNorm(problem, z_, u_) : coneNaturalMap(problem, z_, u_, rhs_);
@@ -305,7 +306,7 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
       if (primal_res > imbalance_ * dual_res || dual_res > imbalance_ * primal_res) {
         factor = dual_res > 0.0 ? std::sqrt(primal_res / dual_res) : kMaxRhoStep;
         factor = std::min(kMaxRhoStep, std::max(1.0 / kMaxRhoStep, factor));
-        if (m > kLargeRows && last_factor_ != 1.0 && (factor > 1.0) != (last_factor_ > 1.0)) imbalance_ *= 2.0;
+        if (m > kAdmmLargeRows && last_factor_ != 1.0 && (factor > 1.0) != (last_factor_ > 1.0)) imbalance_ *= 2.0;
         last_factor_ = factor;
       }
       const double new_rho = rho_ * factor;

@@ -46,20 +46,20 @@ DefaultPlan defaultPlan(const DefaultRuleInput& in) {
   DefaultPlan plan;
   // 0. A guess with every contact closed and sticking: the all-stick solution, if it is one.
   if (in.has_budget && in.rows > 0 && in.sticking_guess) plan.add(S::kStickingStep);
-  if (in.rows <= DefaultSolver::kNewtonFirstRows) {
+  if (in.rows <= kNewtonFirstRows) {
     // 1a. Small problems (a robot's feet, a box's corners): a dense Newton step costs less than a
     //     few Gauss-Seidel sweeps and converges in a handful; then from ProxQP's solution.
     plan.add(S::kNewtonFirst);
     plan.add(S::kProxqpNewton);
-  } else if (in.rows > DefaultSolver::kAdmmAboveRows && in.sparse) {
+  } else if (in.rows > kAdmmAboveRows && in.sparse) {
     // 1b. Large sparse problems: (warm-started: a few sweeps), sparse Newton from the guess when
     //     A has few entries, ADMM; Newton from the initial guess unless sparse Newton ran from it.
     if (in.warm_started) plan.add(S::kWarmSweeps);
-    const bool sparse_newton = in.stored_entries <= DefaultSolver::kSparseNewtonEntries;
+    const bool sparse_newton = in.stored_entries <= kSparseNewtonEntries;
     if (sparse_newton) plan.add(S::kSparseNewton);
     plan.add(S::kAdmm);
     if (!sparse_newton) plan.add(S::kNewtonFromGuess);
-  } else if (in.rows > DefaultSolver::kAdmmAboveRows) {
+  } else if (in.rows > kAdmmAboveRows) {
     // 1c. Large dense problems: NSGS until it stalls, then ADMM.
     plan.add(S::kNsgs);
     plan.add(S::kAdmmAfterNsgs);
@@ -82,8 +82,8 @@ DefaultRuleInput defaultRuleInput(const ContactProblem& problem, const Eigen::Ve
   in.has_budget = settings.max_iterations > 0;
   in.warm_started = settings.warm_start != WarmStart::kNone;
   in.sticking_guess = in.has_budget && in.rows > 0 && stickingGuess(problem, guess);
-  if (in.rows > DefaultSolver::kAdmmAboveRows) {
-    in.sparse = AdmmSolver::factorsSparsely(problem);
+  if (in.rows > kAdmmAboveRows) {
+    in.sparse = sparseEnough(problem, kSparseProblemDensity);
     if (in.sparse) in.stored_entries = storedEntries(problem);
   }
   return in;

@@ -365,10 +365,10 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   const auto& off = problem.offsets();
   const Eigen::Index m = problem.numRows();
   StoppingTest test(problem, tolerance);
-  // Above the small LU's size, a sparse A (held sparse, or dense with at most 10 % nonzero, as
-  // for ADMM) gets a sparse Jacobian and a sparse LU: SpheresBox (768 rows) took 31 ms per
-  // dense step.
-  sparse_ = m > SmallDenseLU::kMaxRows && AdmmSolver::factorsSparsely(problem);
+  // Above the small LU's size, a sparse A (held sparse, or dense with at most
+  // kSparseJacobianDensity nonzero) gets a sparse Jacobian and a sparse LU: SpheresBox (768
+  // rows) took 31 ms per dense step.
+  sparse_ = m > SmallDenseLU::kMaxRows && sparseEnough(problem, kSparseJacobianDensity);
   if (sparse_) prepareSparse(problem);
   uncoupled_ = !sparse_ && m <= SmallDenseLU::kMaxRows && blocksUncoupled(problem);
   diagonal_.resize(m);  // (no allocation once sized: the simulator runs this every step)

@@ -38,8 +38,8 @@ class AdmmSolver final : public ContactSolver {
           double switch_after = 0.0);
 
   /// True when run() factorizes and multiplies A sparsely: A held sparse (SparseDelassus), or
-  /// more than 64 rows and at most 10 % nonzero entries (the FCLib problems of that size are
-  /// 0.6-4 % nonzero).
+  /// more than kDenseFactorRows (64) rows and at most kAdmmSparseDensity (10 %) nonzero entries
+  /// (thresholds.hpp; the FCLib problems of that size ADMM is used on are 0.6-4 % nonzero).
   static bool factorsSparsely(const ContactProblem& problem);
 
   /// false: drop the De Saxce term, i.e. solve the convex CCP relaxation (eq. 78-79) and
@@ -66,7 +66,7 @@ class AdmmSolver final : public ContactSolver {
   Eigen::MatrixXd shifted_;
   Eigen::LLT<Eigen::MatrixXd> llt_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
-  // A sparse A (held sparse, or large and <= 10 % nonzero): factorized sparsely (admm.cpp).
+  // A sparse A (factorsSparsely): factorized sparsely (admm.cpp).
   bool sparse_ = false, sparse_lu_analyzed_ = false;
   Eigen::SparseMatrix<double> sparse_A_, sparse_shifted_;
   std::vector<Eigen::Index> diagonal_;  // positions of the diagonal in sparse_shifted_'s values
@@ -74,6 +74,11 @@ class AdmmSolver final : public ContactSolver {
   Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> sparse_lu_;
   Eigen::VectorXd z_, z_prev_, y_, u_, ulam_, rhs_, work_;
 };
+
+/// A held sparse (SparseDelassus), or more than kDenseFactorRows rows of which at most `density`
+/// are nonzero (a dense A's entries counted: O(rows^2)). thresholds.hpp says which density each
+/// caller uses.
+bool sparseEnough(const ContactProblem& problem, double density);
 
 /// Largest eigenvalue of the symmetric part of A by power iteration (an estimate).
 double largestEigenvalue(const ContactProblem& problem, int iterations = 30);

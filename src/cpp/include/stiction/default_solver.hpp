@@ -13,6 +13,7 @@
 #include "stiction/nsgs.hpp"
 #include "stiction/solver.hpp"
 #include "stiction/sticking_step.hpp"
+#include "stiction/thresholds.hpp"
 
 namespace stiction {
 
@@ -40,8 +41,8 @@ const char* toString(DefaultStage stage);
 /// What the default's rule reads: the problem's size and structure, and the solve's start.
 struct DefaultRuleInput {
   Eigen::Index rows = 0;
-  /// A factored sparsely by ADMM (AdmmSolver::factorsSparsely: held sparse, or more than 64 rows
-  /// and at most 10 % nonzero). Read only above DefaultSolver::kAdmmAboveRows rows.
+  /// A held sparse, or more than kDenseFactorRows rows of which at most kSparseProblemDensity are
+  /// nonzero (sparseEnough, admm.hpp). Read only above kAdmmAboveRows rows.
   bool sparse = false;
   /// The entries A stores (a dense A: its nonzeros). Read only for a large sparse A.
   Eigen::Index stored_entries = 0;
@@ -60,7 +61,8 @@ struct DefaultPlan {
   void add(DefaultStage stage) { stages[static_cast<std::size_t>(count++)] = stage; }
 };
 
-/// The default's rule (docs/solvers.md, "The default's rule"), from its input alone:
+/// The default's rule (docs/solvers.md, "The default's rule"), from its input alone (the sizes:
+/// thresholds.hpp):
 /// - a sticking guess (and a budget, and rows): the sticking step first;
 /// - up to kNewtonFirstRows rows: Newton, then Newton from ProxQP's solution;
 /// - above kAdmmAboveRows rows with a sparse A: (warm-started: a few sweeps), then, with at most
@@ -81,19 +83,8 @@ DefaultRuleInput defaultRuleInput(const ContactProblem& problem, const Eigen::Ve
 /// iterate met when no stage converged.
 class DefaultSolver final : public ContactSolver {
  public:
-  /// Up to this many rows a dense Newton step is cheaper than a few sweeps
-  /// (measured: docs/solvers.md).
-  static constexpr Eigen::Index kNewtonFirstRows = 64;
-  /// Above this many rows ADMM, not Newton, follows a stalled NSGS, and a sparse A goes to
-  /// ADMM directly: the FCLib problems where Newton wins have <= 321 rows, those where ADMM
-  /// wins >= 648 (docs/solvers.md).
-  static constexpr Eigen::Index kAdmmAboveRows = 384;
   /// ADMM's stall horizon, in iterations per row (admm.hpp: switch_after).
   static constexpr double kAdmmHorizonPerRow = 10.0;
-  /// A large sparse problem whose A stores at most this many entries tries Newton (sparse
-  /// Jacobian and LU) from the guess before ADMM (warm-started: after a few sweeps; measured:
-  /// docs/solvers.md, "The default's rule").
-  static constexpr Eigen::Index kSparseNewtonEntries = 50000;
   /// Gauss-Seidel sweeps tried before ADMM on a warm-started large sparse problem.
   static constexpr int kWarmSweeps = 10;
   /// ADMM iterations from the guess on a warm-started medium problem before Newton: where it

@@ -5,6 +5,8 @@
 
 #include <Eigen/Core>
 
+#include "stiction/thresholds.hpp"
+
 namespace stiction {
 
 /// Dense LU with partial pivoting for Newton systems of up to a few dozen contacts: unblocked
@@ -12,9 +14,8 @@ namespace stiction {
 /// than on the arithmetic (measured: ~50k instructions for a 27 x 27 matrix, against ~12k).
 class SmallDenseLU {
  public:
-  /// Up to this many rows. Measured on random spatial problems, whole Newton solves: 1.5x
-  /// faster than with Eigen's LU at 24-63 rows, 1.2x at 96-150, even at 192-240, 0.9x at 321.
-  static constexpr Eigen::Index kMaxRows = 192;
+  /// Up to this many rows (thresholds.hpp: measured against Eigen's LU in whole Newton solves).
+  static constexpr Eigen::Index kMaxRows = kSmallDenseLuRows;
   /// Factor `a` in place (P a = L U); `a` must outlive the solves.
   void compute(Eigen::MatrixXd& a);
   /// x <- a^{-1} x.

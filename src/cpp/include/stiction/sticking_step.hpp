@@ -10,6 +10,7 @@
 
 #include "stiction/block_cholesky.hpp"
 #include "stiction/contact_problem.hpp"
+#include "stiction/thresholds.hpp"
 
 namespace stiction {
 
@@ -41,11 +42,6 @@ class StickingStep {
   static constexpr int kStickSolves = 4;
   /// Up to this many rows the dense factor's solves are plain substitutions (solveShifted).
   static constexpr Eigen::Index kStickSmallRows = 48;
-  /// Up to this many rows a dense A is factored densely whatever its sparsity.
-  static constexpr Eigen::Index kDenseFactorRows = 64;
-  /// A dense A with at most this fraction of nonzeros is factored sparsely by the sticking step
-  /// (a tower's A: block-tridiagonal).
-  static constexpr double kStickSparseDensity = 0.25;
   /// The factor of an earlier call is tried first while A's diagonal is within this fraction (of
   /// its largest entry) of the factored one's.
   static constexpr double kStaleDiagonalChange = 1e-3;
