@@ -497,3 +497,103 @@ def test_a_warm_start_that_stalls_is_retried_from_zero():
     assert traj.converged[1:].all()
     assert traj.residual.max() <= 1e-8 * 1e-2  # far below the tolerance: a clean solve, not a lucky stop
     assert np.abs(traj.q[-1] - traj.q[0]).max() <= 1e-9  # the stack rests
+
+
+# ---- the rule itself (default_solver.hpp: defaultPlan, a pure function of size and structure)
+
+def plan(rows, sparse=False, stored_entries=0, warm_started=False, sticking_guess=False, has_budget=True):
+    return stiction._core._default_plan(rows, sparse, stored_entries, warm_started, sticking_guess, has_budget)
+
+
+SMALL = ["newton_first", "proxqp_newton", "fallbacks"]
+MEDIUM = ["nsgs", "newton_after_nsgs", "newton_from_guess", "fallbacks"]
+
+
+@pytest.mark.parametrize("rows", [3, 12, 27, 64])
+def test_the_rule_starts_problems_of_up_to_64_rows_with_newton(rows):
+    """docs/solvers.md, "The default's rule": <= 64 rows (Rover 12-15, Toy and CubesH8 3-27,
+    Confeti-4 12): Newton first, then Newton from ProxQP's solution, then the fallbacks; with a
+    sticking guess (CubesH8 at rest) the sticking step before them. Sparsity is not read there."""
+    assert plan(rows) == SMALL
+    assert plan(rows, sparse=True, stored_entries=rows, warm_started=True) == SMALL
+    assert plan(rows, sticking_guess=True) == ["sticking_step"] + SMALL
+
+
+@pytest.mark.parametrize("rows", [65, 69, 156, 180, 240, 321, 384])
+def test_the_rule_hands_medium_problems_from_gauss_seidel_to_newton(rows):
+    """65-384 rows (OneObject 69, BoxesStack 156, PerioBox 180, Confeti-ex13 321; box-tower-20's
+    240 when simulated): NSGS until it stalls, Newton from its iterate, then from the initial guess;
+    warm-started, at most 50 ADMM iterations before that Newton. A sparse A changes nothing up to
+    384 rows (BoxStacks, 246 rows at 3.3 %, stays here)."""
+    assert plan(rows) == MEDIUM
+    assert plan(rows, sparse=True, stored_entries=rows * rows // 30) == MEDIUM
+    assert plan(rows, warm_started=True) == ["nsgs", "warm_admm"] + MEDIUM[1:]
+    assert plan(rows, warm_started=True, sticking_guess=True) == ["sticking_step", "nsgs", "warm_admm"] + MEDIUM[1:]
+
+
+@pytest.mark.parametrize("rows, entries", [(385, 5000), (648, 8600), (888, 12400), (1068, 7200), (768, 17000),
+                                           (1710, 50000)])
+def test_the_rule_sends_large_sparse_problems_with_few_entries_to_sparse_newton(rows, entries):
+    """> 384 rows, sparse, at most 50,000 stored entries (Capsules 648-888 rows, 8.6-12.4k entries;
+    Spheres 1068, 7.2k; SpheresBox 768, 17k): sparse Newton from the guess, then ADMM; no second
+    Newton from the guess. Warm-started: at most 10 sweeps first (Capsules-i97 from its previous
+    step; a resting grid of 48 cubes, 576 rows)."""
+    assert entries <= stiction._core.DEFAULT_SPARSE_NEWTON_ENTRIES
+    assert plan(rows, sparse=True, stored_entries=entries) == ["sparse_newton", "admm", "fallbacks"]
+    assert plan(rows, sparse=True, stored_entries=entries, warm_started=True) == \
+        ["warm_sweeps", "sparse_newton", "admm", "fallbacks"]
+
+
+def test_the_rule_sends_large_sparse_problems_with_many_entries_to_admm():
+    """KaplasTower (1710 rows, 117k entries, 4 % nonzero): its sparse LU fills in, so ADMM alone,
+    then Newton from the initial guess if ADMM stalls."""
+    assert plan(1710, sparse=True, stored_entries=117_000) == ["admm", "newton_from_guess", "fallbacks"]
+    assert plan(1710, sparse=True, stored_entries=50_001, warm_started=True) == \
+        ["warm_sweeps", "admm", "newton_from_guess", "fallbacks"]
+
+
+@pytest.mark.parametrize("rows", [385, 420, 2000])
+def test_the_rule_keeps_the_gauss_seidel_prelude_on_large_dense_problems(rows):
+    """> 384 rows with more than 10 % nonzero: NSGS, then ADMM (not a dense LU of > 384 rows),
+    then Newton from the initial guess; stored entries are not read."""
+    expected = ["nsgs", "admm_after_nsgs", "newton_from_guess", "fallbacks"]
+    assert plan(rows) == expected
+    assert plan(rows, stored_entries=10) == expected
+    assert plan(rows, warm_started=True) == expected
+
+
+def test_the_rule_skips_the_sticking_step_without_a_budget_or_rows():
+    assert plan(12, sticking_guess=True, has_budget=False) == SMALL
+    assert plan(0, sticking_guess=True) == SMALL
+    assert plan(900, sparse=True, stored_entries=9000, sticking_guess=True)[0] == "sticking_step"
+
+
+@pytest.mark.parametrize("name", ["KaplasTower--KaplasTower-i1061-4.hdf5.dat", "Capsules--Capsules-i97-269.hdf5",
+                                  "PerioBox--LMGC_100_PR_PerioBox-i00361-60-03000.hdf5",
+                                  "CubesH8--LMGC_GlobalFrictionContactProblem00046.hdf5", "Rover--Rover1039.dat"])
+def test_the_rule_reads_size_and_structure_as_numpy_does(name):
+    """What the rule reads of a bundled problem, against numpy: rows; above 384 rows, A sparse
+    (at most 10 % nonzero) and its nonzero count; from zero, whether b lies strictly inside every
+    cone shifted by De Saxce's term (|b_t| < mu (b_n - mu |b_t|), CubesH8 at rest); and the plan
+    these give is the stages the solve runs."""
+    P = fclib.load(FCLIB_DIR / name)
+    problem = P.problem()
+    A, b = np.asarray(problem.A), np.asarray(problem.b)
+    m = A.shape[0]
+    got = stiction._core._default_rule_input(problem, np.zeros(m), False)
+    assert got["rows"] == m and not got["warm_started"] and got["has_budget"]
+    if m > 384:
+        assert got["sparse"] == (np.count_nonzero(A) <= 0.1 * A.size)
+        assert got["stored_entries"] == (np.count_nonzero(A) if got["sparse"] else 0)
+    else:
+        assert not got["sparse"] and got["stored_entries"] == 0  # not read
+    B = b.reshape(-1, 3)
+    t = np.hypot(B[:, 0], B[:, 1])
+    assert got["sticking_guess"] == bool((t < (1 - 1e-6) * P.mu * (B[:, 2] - P.mu * t)).all())
+    assert stiction._core._default_rule_input(problem, np.zeros(m), True)["warm_started"]
+    stages = plan(**got)
+    r = stiction.solve(problem, tol=1e-8, max_iter=5000)
+    # the first stage the plan names is the first the solve ran
+    first = {"sticking_step": "sticking step", "newton_first": "newton", "sparse_newton": "newton",
+             "admm": "admm", "nsgs": "nsgs"}[stages[0]]
+    assert stage_names(r)[0] == first, (stages, r.stages)

@@ -109,7 +109,7 @@ def test_agrees_with_pinocchio_admm_on_the_rank_deficient_cube(sliding):
 
 @pytest.mark.parametrize("m", [1, 2, 3, 9, 27, 64, 192])
 def test_newton_small_lu_solves_systems_that_need_pivoting(m):
-    """The Newton step's own dense LU (newton.hpp, SmallDenseLU, up to 192 rows): a generalized
+    """The Newton step's own dense LU (dense_lu.hpp, SmallDenseLU, up to 192 rows): a generalized
     Jacobian of the natural map is not symmetric and its diagonal can vanish (a sliding block's
     I - JP + kappa JP A rows), so rows must be swapped. Matrices with a zero diagonal, checked
     against numpy; without the row swaps the 2 x 2 case divides by zero and the others lose

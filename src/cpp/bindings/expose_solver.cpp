@@ -7,7 +7,8 @@
 #include "expose.hpp"
 #include "stiction/exact_law.hpp"
 #include "stiction/formulation.hpp"
-#include "stiction/newton.hpp"
+#include "stiction/default_solver.hpp"
+#include "stiction/dense_lu.hpp"
 #include "stiction/solver.hpp"
 
 namespace bp = boost::python;
@@ -132,7 +133,7 @@ double residualOf(const bp::object& problem, const bp::object& lam) {
   return residual(p, toVector(lam, "residual: lam", p.numRows()));
 }
 
-// For the tests: Newton's small dense LU (newton.hpp) on any square matrix.
+// For the tests: Newton's small dense LU (dense_lu.hpp) on any square matrix.
 Eigen::VectorXd smallDenseLuSolve(const bp::object& matrix, const bp::object& rhs) {
   Eigen::MatrixXd a = toMatrix(matrix, "_small_dense_lu_solve: matrix");
   if (a.rows() != a.cols() || a.rows() > SmallDenseLU::kMaxRows)
@@ -143,6 +144,43 @@ Eigen::VectorXd smallDenseLuSolve(const bp::object& matrix, const bp::object& rh
   lu.compute(a);
   lu.solve(x);
   return x;
+}
+
+// For the tests: the default's rule (default_solver.hpp) on a stated size and structure.
+bp::list defaultPlanOf(const bp::object& rows, const bp::object& sparse, const bp::object& stored_entries,
+                       const bp::object& warm_started, const bp::object& sticking_guess, const bp::object& has_budget) {
+  DefaultRuleInput in;
+  const long r = toInteger(rows, "_default_plan: rows");
+  const long e = toInteger(stored_entries, "_default_plan: stored_entries");
+  if (r < 0) throw std::invalid_argument("_default_plan: rows must be >= 0, got " + std::to_string(r));
+  if (e < 0) throw std::invalid_argument("_default_plan: stored_entries must be >= 0, got " + std::to_string(e));
+  in.rows = r;
+  in.stored_entries = e;
+  in.sparse = toBool(sparse, "_default_plan: sparse");
+  in.warm_started = toBool(warm_started, "_default_plan: warm_started");
+  in.sticking_guess = toBool(sticking_guess, "_default_plan: sticking_guess");
+  in.has_budget = toBool(has_budget, "_default_plan: has_budget");
+  bp::list out;
+  for (DefaultStage stage : defaultPlan(in)) out.append(std::string(toString(stage)));
+  return out;
+}
+
+// For the tests: what the rule reads of a problem, its guess and a warm start (or not).
+bp::dict defaultRuleInputOf(const bp::object& problem, const bp::object& guess, const bp::object& warm_started) {
+  const ContactProblem& p =
+      toObject<ContactProblem>(problem, "_default_rule_input: problem", "stiction.ContactProblem");
+  const Eigen::VectorXd g = toVector(guess, "_default_rule_input: guess", p.numRows());
+  SolverSettings settings;
+  settings.warm_start = toBool(warm_started, "_default_rule_input: warm_started") ? WarmStart::kGiven : WarmStart::kNone;
+  const DefaultRuleInput in = defaultRuleInput(p, g, settings);
+  bp::dict d;
+  d["rows"] = static_cast<long>(in.rows);
+  d["sparse"] = in.sparse;
+  d["stored_entries"] = static_cast<long>(in.stored_entries);
+  d["warm_started"] = in.warm_started;
+  d["sticking_guess"] = in.sticking_guess;
+  d["has_budget"] = in.has_budget;
+  return d;
 }
 
 ExactLawMeasures exactLawOf(const bp::object& problem, const bp::object& lam, const bp::object& floor) {
@@ -333,7 +371,13 @@ void exposeSolver() {
           "of sliding blocks.");
 
   // The default's size bound for trying sparse Newton first (tests/test_default_rule.py).
-  bp::scope().attr("DEFAULT_SPARSE_NEWTON_ENTRIES") = static_cast<long>(DefaultSolver::kSparseNewtonEntries);
+  bp::scope().attr("DEFAULT_SPARSE_NEWTON_ENTRIES") = static_cast<long>(kSparseNewtonEntries);
+  bp::def("_default_plan", &defaultPlanOf,
+          (bp::arg("rows"), bp::arg("sparse"), bp::arg("stored_entries"), bp::arg("warm_started"),
+           bp::arg("sticking_guess"), bp::arg("has_budget") = true),
+          "(for tests) the default solver's stages, in order, for a problem of this size and structure");
+  bp::def("_default_rule_input", &defaultRuleInputOf, (bp::arg("problem"), bp::arg("guess"), bp::arg("warm_started")),
+          "(for tests) what the default's rule reads of a problem and its guess (a dict)");
   bp::def("_small_dense_lu_solve", &smallDenseLuSolve, (bp::arg("matrix"), bp::arg("rhs")),
           "(for tests) x = matrix^-1 rhs by the Newton solver's small dense LU");
   bp::def("solver_names", &names);

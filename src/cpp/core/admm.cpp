@@ -1,12 +1,11 @@
 #include "stiction/admm.hpp"
 
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <vector>
 
-#include "stiction/clock.hpp"
 #include "stiction/cone.hpp"
+#include "stiction/thresholds.hpp"
 #include "stiction/verdict.hpp"
 
 namespace stiction {
@@ -54,9 +53,9 @@ double coneNaturalMap(const ContactProblem& problem, const Eigen::Ref<const Eige
 
 namespace {
 
-// Above this many rows a factorization costs more than many iterations: the stopping test
-// (a product with A) runs every kCheckEvery iterations, and rho changes less often.
-constexpr Eigen::Index kLargeRows = 64;
+// Above kAdmmLargeRows rows (thresholds.hpp) a factorization costs more than many iterations:
+// the stopping test (a product with A) runs every kCheckEvery iterations, and rho changes less
+// often.
 constexpr int kCheckEvery = 4;
 // Residual balancing: rho moves when ADMM's primal and dual residuals differ by more than a
 // threshold (10), by the square root of their ratio (at most kMaxRhoStep either way); on a
@@ -70,8 +69,6 @@ constexpr int kCheckEvery = 4;
 constexpr double kMaxRhoStep = 25.0;
 constexpr double kImbalance = 10.0;
 constexpr int kStallWindow = 400;
-// A (above kLargeRows rows) with at most this fraction of nonzeros is factorized sparsely.
-constexpr double kSparseDensity = 0.1;
 
 // v += sign * E s(u): the De Saxce shift mu ||u_t|| on each normal row (eq. 76-77).
 void addDesaxce(const ContactProblem& problem, const Eigen::VectorXd& u, double sign, Eigen::VectorXd& v) {
@@ -88,12 +85,14 @@ void addDesaxce(const ContactProblem& problem, const Eigen::VectorXd& u, double 
 
 }  // namespace
 
-bool AdmmSolver::factorsSparsely(const ContactProblem& problem) {
+bool sparseEnough(const ContactProblem& problem, double density) {
   if (problem.delassus().sparse() != nullptr) return true;  // held sparse: always
   const Eigen::MatrixXd& A = problem.delassus().dense();
   const Eigen::Index m = A.rows();
-  return m > kLargeRows && double((A.array() != 0.0).count()) <= kSparseDensity * double(m) * double(m);
+  return m > kDenseFactorRows && double((A.array() != 0.0).count()) <= density * double(m) * double(m);
 }
+
+bool AdmmSolver::factorsSparsely(const ContactProblem& problem) { return sparseEnough(problem, kAdmmSparseDensity); }
 
 void AdmmSolver::prepareSparse(const ContactProblem& problem) {
   // A problem held sparse (SparseDelassus) is factorized sparsely whatever its size; a dense A
@@ -205,8 +204,7 @@ double AdmmSolver::largestEigenvalueEstimate(const ContactProblem& problem, int 
 int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max_iterations,
                     double tolerance, double time_limit, double initial_rho, bool resume,
                     std::string& message, double switch_after) {
-  using Clock = FastClock;  // the time-stamp counter (clock.hpp)
-  const auto start = Clock::now();
+  monitor_.startClock(time_limit);
   const Eigen::Index m = problem.numRows();
   const double scale = stoppingScale(problem);
   StoppingTest test(problem, tolerance);
@@ -238,8 +236,8 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
     imbalance_ = kImbalance;
     last_factor_ = 1.0;
     best_r_ = std::numeric_limits<double>::infinity();
-    window_.clear();
-    window_.push_back({0, best_r_});
+    monitor_.resetRate(kStallWindow);
+    monitor_.record(0, best_r_);
     total_iterations_ = 0;
   }
   message = "iteration limit reached";
@@ -267,7 +265,7 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
     // The stopping test needs u at z, one product with A: as much as the rest of the
     // iteration (the two triangular solves) on a large problem, so there it runs every
     // kCheckEvery iterations (at most kCheckEvery - 1 iterations late).
-    if (m <= kLargeRows || (it + 1) % kCheckEvery == 0 || it + 1 == max_iterations) {
+    if (m <= kAdmmLargeRows || (it + 1) % kCheckEvery == 0 || it + 1 == max_iterations) {
       multiplyA(problem, z_, u_);
       u_ -= problem.b();
       const double map = desaxce_ ? naturalMapNorm(problem, z_, u_) : coneNaturalMap(problem, z_, u_, rhs_);
@@ -292,19 +290,11 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
         // improve at all). The best, not the last: ADMM's residual wanders (rho and the
         // active set change) and plateaus for hundreds of iterations before dropping
         // (Capsules-i122: 1.6e-7 from iteration 440 to 880, then 1e-8 at 1040).
-        const int g = total_iterations_ + it + 1;  // since the start, over resumed runs
-        window_.push_back({g, best_r_});
-        while (window_.size() > 2 && window_[1].first <= g - kStallWindow) window_.pop_front();
-        if (window_.front().first <= g - kStallWindow) {
-          const double span = double(g - window_.front().first);
-          const double rate = std::pow(best_r_ / window_.front().second, 1.0 / span);
-          const double needed = rate < 1.0 ? std::log(tolerance / best_r_) / std::log(rate)
-                                           : std::numeric_limits<double>::infinity();
-          if (needed > switch_after) {
-            message = "stalled";
-            ++it;
-            break;
-          }
+        monitor_.record(total_iterations_ + it + 1, best_r_);  // since the start, over resumed runs
+        if (monitor_.stalled(tolerance, switch_after)) {
+          message = "stalled";
+          ++it;
+          break;
         }
       }
     }
@@ -316,7 +306,7 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
       if (primal_res > imbalance_ * dual_res || dual_res > imbalance_ * primal_res) {
         factor = dual_res > 0.0 ? std::sqrt(primal_res / dual_res) : kMaxRhoStep;
         factor = std::min(kMaxRhoStep, std::max(1.0 / kMaxRhoStep, factor));
-        if (m > kLargeRows && last_factor_ != 1.0 && (factor > 1.0) != (last_factor_ > 1.0)) imbalance_ *= 2.0;
+        if (m > kAdmmLargeRows && last_factor_ != 1.0 && (factor > 1.0) != (last_factor_ > 1.0)) imbalance_ *= 2.0;
         last_factor_ = factor;
       }
       const double new_rho = rho_ * factor;
@@ -326,7 +316,7 @@ int AdmmSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int max
         since_rho_change_ = 0;
       }
     }
-    if (time_limit > 0.0 && std::chrono::duration<double>(Clock::now() - start).count() > time_limit) {
+    if (monitor_.outOfTime()) {
       message = "time limit reached";
       ++it;
       break;

@@ -1,13 +1,11 @@
 #include "stiction/nsgs.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
 
-#include "stiction/clock.hpp"
 #include "stiction/cone.hpp"
 #include "stiction/local_solve.hpp"
 #include "stiction/verdict.hpp"
@@ -16,7 +14,12 @@ namespace stiction {
 
 namespace {
 
-constexpr double kInfSweeps = 1e300;
+// The stall test's rate is measured over this many sweeps; from sweep kTrackFrom on the earliest
+// predicted finish is kept, and from sweep kJudgeFrom a prediction kDeceleration times later is a
+// stall (see sweep()).
+constexpr int kRateWindow = 10;
+constexpr int kTrackFrom = 20;
+constexpr int kJudgeFrom = 30;
 constexpr double kDeceleration = 1.5;
 
 // Inverse of a diagonal block; a singular block (dependent rows of one contact)
@@ -93,8 +96,8 @@ void NsgsSolver::prepare(const ContactProblem& problem) {
 
 int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int max_sweeps,
                       double tolerance, double switch_after, double time_limit, std::string& message) {
-  using Clock = FastClock;  // the time-stamp counter (clock.hpp)
-  const auto start = Clock::now();
+  monitor_.startClock(time_limit);
+  if (switch_after > 0.0) monitor_.resetRate(kRateWindow, {kTrackFrom, kJudgeFrom, kDeceleration});
   prepare(problem);
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
@@ -115,8 +118,6 @@ int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   A.multiply(lam, u_);
   u_ -= problem.b();
 
-  double history[11];
-  double earliest_finish = kInfSweeps;
   int done = 0;
   message = "iteration limit reached";
   for (int it = 0; it < max_sweeps; ++it) {
@@ -197,26 +198,21 @@ int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int m
       message = "diverged (non-finite residual)";
       break;
     }
-    history[it % 11] = r;
-    if (switch_after > 0.0 && it >= 10) {
-      // Linear rate over the last 10 sweeps, and the sweeps it still needs.
-      const double rate = std::pow(r / history[(it - 10) % 11], 0.1);
-      const double needed = rate < 1.0 ? std::log(tolerance / r) / std::log(rate) : kInfSweeps;
-      // A decelerating Gauss-Seidel is stalling too: the sweep at which it predicts to
-      // finish (it + needed) moved more than 1.5x later than the earliest such prediction
-      // (from sweep 20 on, once the first window's fast start is out of the rate).
+    if (switch_after > 0.0) {
+      // Linear rate over the last 10 sweeps, and the sweeps it still needs (more than
+      // switch_after: stalled). A decelerating Gauss-Seidel is stalling too: the sweep at which
+      // it predicts to finish (it + needed) moved more than 1.5x later than the earliest such
+      // prediction (from sweep 20 on, once the first window's fast start is out of the rate).
       // Measured on FCLib: KaplasTower's prediction grows from 247 (sweep 20) to 441
       // (sweep 80) and it needs 1056 sweeps (2 s) where ADMM takes 0.5 s; Spheres' stays at
       // 231-232 and it converges at 235; the Capsules' and SpheresBox's grow from sweep 30.
-      const double finish = it + needed;
-      if (it >= 20) earliest_finish = std::min(earliest_finish, finish);
-      if (needed > switch_after || (it >= 30 && finish > kDeceleration * earliest_finish)) {
+      monitor_.record(it, r);
+      if (monitor_.stalled(tolerance, switch_after)) {
         message = "stalled";
         break;
       }
     }
-    if (time_limit > 0.0 &&
-        std::chrono::duration<double>(Clock::now() - start).count() > time_limit) {
+    if (monitor_.outOfTime()) {
       message = "time limit reached";
       break;
     }

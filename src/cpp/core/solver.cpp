@@ -8,6 +8,7 @@
 #include "stiction/clock.hpp"
 #include "stiction/admm.hpp"
 #include "stiction/cone.hpp"
+#include "stiction/default_solver.hpp"
 #include "stiction/newton.hpp"
 #include "stiction/nsgs.hpp"
 #include "stiction/proxqp_warm_start.hpp"

@@ -515,10 +515,12 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
     return;
   }
   const Eigen::Index entries = delassusFactors(sd);
-  // Sparse when the parts leave most of A empty: many parts, more rows than the dense
-  // solvers handle well (the default rule's threshold), at most 25 % of the entries (a tower's
-  // block-tridiagonal A is 14-20 %).
-  sd.sparse = sd.parts.size() > 1 && rows > kSparseDelassusRows && entries * 4 <= rows * rows;
+  // Sparse when the parts leave most of A empty: many parts, more than kSparseDelassusRows rows
+  // (a storage choice measured on cube grids, not the default rule's kAdmmAboveRows), at most
+  // kSparseDelassusDensity of the entries (a tower's block-tridiagonal A is 14-20 %;
+  // thresholds.hpp).
+  sd.sparse = sd.parts.size() > 1 && rows > kSparseDelassusRows &&
+              double(entries) <= kSparseDelassusDensity * double(rows) * double(rows);
   sd.a_in_operator = false;  // A_sparse holds this step's A again
   sd.a_known_finite = false;
   if (sd.sparse && sd.parts_share_rows) {  // rows shared by two parts (contacts between bodies)

@@ -26,6 +26,7 @@
 
 #include "stiction/clock.hpp"
 #include "stiction/simulator.hpp"
+#include "stiction/thresholds.hpp"
 
 namespace stiction {
 namespace stages {
@@ -73,7 +74,8 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
                   const Eigen::VectorXd& v, double implicit_pd_step);
 
 /// 4b. A = J M^-1 J^T (eq. 22) = sum over parts of W_s^T W_s, W_s = D_s^-1/2 U_s^-1 J_s^T:
-/// symmetric by construction; dense, or sparse (sd.sparse) when many parts share > 96 rows.
+/// symmetric by construction; dense, or sparse (sd.sparse) when many parts share more than
+/// kSparseDelassusRows rows and at most kSparseDelassusDensity of A is nonzero (thresholds.hpp).
 void delassusOperator(const SimulatorModel& sim, SimulatorData& sd);
 
 /// 4b for a problem that is one robot's alone (robot_delassus.cpp): sd.A = J M^-1 J^T from the
@@ -107,11 +109,6 @@ void integrateRK4(const SimulatorModel& sim, SimulatorData& sd);
 /// 6. The relaxed DAI as an ODE: one accepted Bogacki-Shampine 3(2) step of at most dt.
 void integrateAdaptive(const SimulatorModel& sim, SimulatorData& sd);
 
-/// Above this many rows, a world of several parts whose A is at most 10 % nonzero gets a
-/// sparse Delassus operator (measured on cube grids: the dense A's assembly, products and
-/// Gauss-Seidel sweeps cost O(rows^2) where the sparse ones cost O(rows); at 128 contacts,
-/// 384 rows, a step took 0.95 ms with the dense operator and 0.57 ms with the sparse one).
-constexpr Eigen::Index kSparseDelassusRows = 96;
 
 // ---- the world's parts (SimulatorModel::systems, SimulatorData::parts)
 

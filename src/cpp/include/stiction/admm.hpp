@@ -15,10 +15,9 @@
 #include <Eigen/SparseCore>
 #include <Eigen/SparseLU>
 
-#include <deque>
-#include <utility>
 #include <vector>
 
+#include "stiction/iteration_monitor.hpp"
 #include "stiction/solver.hpp"
 
 namespace stiction {
@@ -39,8 +38,8 @@ class AdmmSolver final : public ContactSolver {
           double switch_after = 0.0);
 
   /// True when run() factorizes and multiplies A sparsely: A held sparse (SparseDelassus), or
-  /// more than 64 rows and at most 10 % nonzero entries (the FCLib problems of that size are
-  /// 0.6-4 % nonzero).
+  /// more than kDenseFactorRows (64) rows and at most kAdmmSparseDensity (10 %) nonzero entries
+  /// (thresholds.hpp; the FCLib problems of that size ADMM is used on are 0.6-4 % nonzero).
   static bool factorsSparsely(const ContactProblem& problem);
 
   /// false: drop the De Saxce term, i.e. solve the convex CCP relaxation (eq. 78-79) and
@@ -61,13 +60,13 @@ class AdmmSolver final : public ContactSolver {
   double imbalance_ = 10.0;    // primal/dual residual ratio that moves rho (large m: grows on reversals)
   double last_factor_ = 1.0;   // the last change of rho (its direction)
   double best_r_ = 0.0;        // best relative residual at z so far (the stall test's)
-  std::deque<std::pair<int, double>> window_;  // (iteration, best_r_) over the stall window
+  IterationMonitor monitor_;   // time limit; best_r_'s rate over the stall window (kept on resume)
   int total_iterations_ = 0;   // over resumed runs
   Eigen::VectorXd primal_;  // the unprojected iterate x
   Eigen::MatrixXd shifted_;
   Eigen::LLT<Eigen::MatrixXd> llt_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
-  // A sparse A (held sparse, or large and <= 10 % nonzero): factorized sparsely (admm.cpp).
+  // A sparse A (factorsSparsely): factorized sparsely (admm.cpp).
   bool sparse_ = false, sparse_lu_analyzed_ = false;
   Eigen::SparseMatrix<double> sparse_A_, sparse_shifted_;
   std::vector<Eigen::Index> diagonal_;  // positions of the diagonal in sparse_shifted_'s values
@@ -75,6 +74,11 @@ class AdmmSolver final : public ContactSolver {
   Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> sparse_lu_;
   Eigen::VectorXd z_, z_prev_, y_, u_, ulam_, rhs_, work_;
 };
+
+/// A held sparse (SparseDelassus), or more than kDenseFactorRows rows of which at most `density`
+/// are nonzero (a dense A's entries counted: O(rows^2)). thresholds.hpp says which density each
+/// caller uses.
+bool sparseEnough(const ContactProblem& problem, double density);
 
 /// Largest eigenvalue of the symmetric part of A by power iteration (an estimate).
 double largestEigenvalue(const ContactProblem& problem, int iterations = 30);

@@ -1,6 +1,6 @@
 // Sparse Cholesky factor of a Delassus operator held in 3 x 3 blocks (one per spatial contact).
 //
-// The sticking step (newton.hpp) solves with R = A + rho I twice per refinement step. Where A is
+// The sticking step (sticking_step.hpp) solves with R = A + rho I twice per refinement step. Where A is
 // sparse (many bodies: a grid, a tower) Eigen's simplicial factor walks L one scalar at a time,
 // each entry an index load and a multiply-add chained on the last: on a 256-contact tower its
 // four triangular solves were a third of the solve phase. A spatial contact's three rows share

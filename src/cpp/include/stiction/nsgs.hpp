@@ -7,6 +7,7 @@
 
 #include <vector>
 
+#include "stiction/iteration_monitor.hpp"
 #include "stiction/solver.hpp"
 
 namespace stiction {
@@ -33,6 +34,7 @@ class NsgsSolver final : public ContactSolver {
   std::vector<double> inverses_;     // packed G_i^-1
   std::vector<Eigen::Index> packed_offsets_;
   Eigen::VectorXd u_, delta_, local_;
+  IterationMonitor monitor_;  // time limit, rate and stall
 };
 
 }  // namespace stiction
