@@ -79,7 +79,7 @@ import pinocchio as pin
 
 import stiction
 from stiction.bench import sweep
-from stiction.bench import mujoco_scenes
+from stiction.bench import mujoco_twins
 from stiction.robots import ROBOTS
 from stiction.simulator import PHASES, Simulator
 
@@ -100,23 +100,16 @@ REPEATS, QUICK_REPEATS = 7, 3
 # ---------------------------------------------------------------- MuJoCo scene
 def mujoco_model(scene, impratio: float) -> "mujoco.MjModel":
     """The MuJoCo twin of the stiction scene (see the module docstring for every setting): the
-    robot, feet, ground and actuators from stiction.bench.mujoco_scenes.solo12_spec."""
-    spec = mujoco_scenes.solo12_spec(scene)
-    opt = spec.option
-    opt.timestep = scene.dt
-    opt.gravity = scene.model.gravity.linear
-    opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-    opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
-    opt.iterations = 100
-    opt.tolerance = 1e-10
-    opt.impratio = impratio
+    robot, feet, ground and actuators from stiction.bench.mujoco_twins.solo12_spec, its options
+    from mujoco_twins.accurate_options."""
+    spec = mujoco_twins.solo12_spec(scene)
+    mujoco_twins.accurate_options(spec, scene.dt, scene.model.gravity.linear, impratio)
     return spec.compile()
 
 
 def mujoco_initial_state(model, scene) -> np.ndarray:
     """stiction's q0 as a MuJoCo mjSTATE_INTEGRATION vector, ctrl = the posture."""
-    return mujoco_scenes.solo12_state(model, scene.q0, scene.q_target)
+    return mujoco_twins.solo12_state(model, scene.q0, scene.q_target)
 
 
 @dataclass
