@@ -40,8 +40,8 @@ import numpy as np
 import stiction
 from stiction import _core, fclib
 from stiction.bench import siconos
+from stiction.bench.profiles import fclib_problem_set
 
-ROOT = Path(__file__).resolve().parents[1]
 SOLVERS = {name.upper(): name for name in siconos.SOLVERS}  # column name: the driver's solver
 
 # When a solver has been timed enough (the same rule on both sides): 0.5 s of solves and at least 3
@@ -100,7 +100,7 @@ def main() -> int:
         print(f"Siconos is not importable by {args.siconos_python} (apt install python3-siconos python3-scipy); "
               "nothing to compare", file=sys.stderr)
         return 0
-    files = sorted(p for p in (ROOT / "benchmarks" / "fclib").iterdir() if p.suffix in (".hdf5", ".dat"))
+    files = [Path(r["path"]) for r in fclib_problem_set()]  # every bundled FCLib problem, sorted
     if args.only:
         files = [f for f in files if any(f.name.startswith(o) for o in args.only)]
     rows = []

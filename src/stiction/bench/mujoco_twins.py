@@ -549,21 +549,29 @@ def state_of(model, data) -> np.ndarray:
     return state
 
 
-def timed_rollout(model, state0: np.ndarray, nstep: int) -> float:
-    """Wall seconds of `nstep` steps by mujoco.rollout (a C++ loop; records the state), from
-    state0 (mjSTATE_INTEGRATION, ctrl included)."""
-    mj = _mujoco()
+def rollout(model, data, initial: np.ndarray, control: np.ndarray | None, nstep: int) -> tuple[float, float, np.ndarray]:
+    """`nstep` steps by ``mujoco.rollout.rollout`` (a C++ loop that records the full physics state)
+    from `initial` (mjSTATE_FULLPHYSICS) under the constant `control` (shape (1, 1, nu), or None):
+    its wall seconds, the process's CPU seconds (time the machine's other work held the core left
+    out) and the recorded states (1, nstep, state size). The one MuJoCo timing of every bench."""
     import mujoco.rollout  # noqa: PLC0415
 
+    t0, c0 = time.perf_counter(), time.process_time()
+    states, _ = mujoco.rollout.rollout(model, data, initial, control, nstep=nstep)
+    return time.perf_counter() - t0, time.process_time() - c0, states
+
+
+def timed_rollout(model, state0: np.ndarray, nstep: int) -> float:
+    """Wall seconds of `nstep` steps by :func:`rollout` from state0 (mjSTATE_INTEGRATION, ctrl
+    included)."""
+    mj = _mujoco()
     data = mj.MjData(model)
     mj.mj_setState(model, data, state0, mj.mjtState.mjSTATE_INTEGRATION)
     physics = mj.mjtState.mjSTATE_FULLPHYSICS
     initial = np.empty(mj.mj_stateSize(model, physics))
     mj.mj_getState(model, data, initial, physics)
     control = data.ctrl.copy().reshape(1, 1, -1)
-    t0 = time.perf_counter()
-    mujoco.rollout.rollout(model, data, initial, control, nstep=nstep)
-    return time.perf_counter() - t0
+    return rollout(model, data, initial, control, nstep)[0]
 
 
 def record(model, state0: np.ndarray, nstep: int, bodies: list[str], sites: list[str] = (),
