@@ -10,7 +10,7 @@ exits 0.
 Scenes (default): solo12-stand, go2-stand, anymal-stand, talos-stand, ur5-push-wall,
 ur5-push-box, solo12-slope-stick (joints locked, gravity tilted 15°, as stiction models the slope) and
 solo12-on-board (Solo-12 on a free board on the ground: contacts between two bodies). The MuJoCo
-twin of each is built by ``stiction.bench.mujoco_robots.mujoco_twin``
+twin of each is built by ``stiction.bench.mujoco_twins.mujoco_twin``
 from the scene's own Pinocchio model (same masses, inertias, joint frames, contact spheres and
 points on the same links, joint PD, initial state, dt, μ, gravity); MuJoCo: elliptic cones,
 Newton, 100 iterations, tolerance 1e-10, implicitfast, impratio 1 (and any ``--impratio``), its
@@ -33,7 +33,7 @@ Reported: the median over repetitions (and min–max), and the ratio stiction / 
 repetition (median, min–max). Each repetition starts from a fresh Simulator / reset MjData.
 
 Accuracy (from the last repetition's rollouts; the same code measures both, from the
-configurations alone: ``mujoco_robots.contact_accuracy``): drift — the largest displacement of
+configurations alone: ``mujoco_twins.contact_accuracy``): drift — the largest displacement of
 a closed contact along its half-space from the settle time to the end (sphere centres: rolling
 counts); penetration — the deepest gap below zero over the run. stiction's convergence and
 largest NCP residual are shown beside.
@@ -58,7 +58,7 @@ import pinocchio as pin
 import stiction
 from stiction import _core
 from stiction.bench import sweep
-from stiction.bench import mujoco_robots
+from stiction.bench import mujoco_twins
 from stiction.simulator import PHASES, Simulator
 
 SCENES = ("solo12-stand", "go2-stand", "anymal-stand", "talos-stand", "ur5-push-wall", "ur5-push-box",
@@ -77,7 +77,7 @@ class Case:
         self.scene = Simulator(scene_name).scene
         self.n = int(round(duration / self.scene.dt))
         self.duration = self.n * self.scene.dt
-        self.twins = {r: mujoco_robots.mujoco_twin(self.scene, impratio=r) for r in impratios}
+        self.twins = {r: mujoco_twins.mujoco_twin(self.scene, impratio=r) for r in impratios}
         self.datas = {r: mujoco.MjData(t.model) for r, t in self.twins.items()}
         self.state0 = {r: t.initial_state(self.scene.q0, self.scene.v0) for r, t in self.twins.items()}
         self.last: dict = {}
@@ -105,14 +105,12 @@ class Case:
     # ---- MuJoCo
     def mujoco_rollout(self, impratio: float) -> tuple[float, float]:
         import mujoco
-        import mujoco.rollout
 
         twin, data = self.twins[impratio], self.datas[impratio]
         mujoco.mj_resetData(twin.model, data)
         control = twin.ctrl.reshape(1, 1, -1) if twin.model.nu else None
-        t0, c0 = time.perf_counter(), time.process_time()
-        states, _ = mujoco.rollout.rollout(twin.model, data, self.state0[impratio], control, nstep=self.n)
-        us, cpu = (time.perf_counter() - t0) / self.n * 1e6, (time.process_time() - c0) / self.n * 1e6
+        wall, cpu, states = mujoco_twins.rollout(twin.model, data, self.state0[impratio], control, self.n)
+        us, cpu = wall / self.n * 1e6, cpu / self.n * 1e6
         self.last[("mujoco", impratio)] = states[0, :, 1:1 + twin.model.nq]  # FULLPHYSICS: time, qpos, ...
         return us, cpu
 
@@ -136,7 +134,7 @@ class Case:
     def accuracy(self) -> dict:
         sim, traj = self.last["stiction"]
         summary = sim.summary(traj)
-        out = {"stiction": {**mujoco_robots.contact_accuracy(self.scene, traj.t, traj.q),
+        out = {"stiction": {**mujoco_twins.contact_accuracy(self.scene, traj.t, traj.q),
                             "converged": summary["all_converged"], "max_residual": summary["max_residual"],
                             "slip": summary["max_foot_slip"],
                             "phases_us": dict(zip(PHASES, (float(x) for x in np.median(traj.timings[1:], axis=0))))}}
@@ -144,7 +142,7 @@ class Case:
         for r, twin in self.twins.items():
             qpos = self.last[("mujoco", r)]
             Q = np.vstack([self.scene.q0, twin.q_from_qpos(qpos, self.scene.model.nq)])
-            acc = mujoco_robots.contact_accuracy(self.scene, t, Q)
+            acc = mujoco_twins.contact_accuracy(self.scene, t, Q)
             # the step-by-step run and mujoco.rollout end in the same state (same model, control)
             acc["rollout_vs_steps"] = float(np.abs(qpos[-1] - self.last[("mujoco_qpos_end", r)]).max())
             out[f"mujoco impratio {r:g}"] = acc
@@ -321,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, help="also write the Markdown report to this file")
     ap.add_argument("--json", action="store_true", help="print JSON instead of Markdown")
     args = ap.parse_args(argv)
-    if not mujoco_robots.available():
+    if not mujoco_twins.available():
         print("bench_robots_mujoco: MuJoCo is not installed (the optional `bench` extra: "
               "pip install 'mujoco==4.0.*'); nothing to compare, skipping.")
         return 0

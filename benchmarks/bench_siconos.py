@@ -5,21 +5,22 @@ bundled FCLib problems, every answer judged by one measure.
     python benchmarks/bench_siconos.py [--tol 1e-8] [--out docs/siconos-table.md] [--only NAME ...]
 
 Siconos is Debian's ``python3-siconos`` (with ``python3-scipy``), a system Python package: it is run
-by ``/usr/bin/python3`` (``--siconos-python``) in a subprocess per (problem, solver), which times
-its own solve call; stiction runs in this process. Without Siconos the script says so and exits 0.
+by ``/usr/bin/python3`` (``--siconos-python``) in one helper process that times its own solve calls
+(:mod:`stiction.bench.siconos`, the driver ``stiction bench profiles`` uses too, which says how the
+problems are handed over); stiction runs in this process. Without Siconos the script says so and
+exits 0.
 
-Problems: Siconos reads the ``.dat`` files itself (its sparse-block storage); the FCLib HDF5 files
-(which its Python build cannot read) are handed over as W (scipy CSR when at most 10 % nonzero,
-else dense), q and mu in Siconos' (n, t1, t2) order. Measure: the relative natural-map residual of
-the De Saxce problem on the W as stored (||lambda - P_K(lambda - (u + E s(u)))|| / ||q||, Siconos'
-own scaling), computed here by stiction for every solver's answer; "solved" means <= 1e-8 by that
-measure, whatever the solver claims. Time: the median over repeats (until 0.5 s are spent and at
-least 3 solves done, or 2 s; at most 20,000 solves) of the solve's own time (stiction:
-``result.seconds``, the C++ solve and its verdict, each after an untimed solve of the problem with
-A and b scaled by 4, so that no factorization carries over from the previous solve of the same
-problem; Siconos: its ``fc3d_driver`` call timed in its process); at most ``--time-limit`` seconds per solve (Siconos: the subprocess is stopped). Problems
-of at most 64 rows are timed in 5 rounds, each stiction then every Siconos solver; the reported
-ratio is the median of the rounds' ratios. Settings: tolerance ``--tol`` for every solver, 10,000
+Measure: the relative natural-map residual of the De Saxce problem on the W as stored
+(||lambda - P_K(lambda - (u + E s(u)))|| / ||q||, Siconos' own scaling), computed here by stiction
+for every solver's answer; "solved" means <= 1e-8 by that measure, whatever the solver claims.
+Time: the median over repeats (until 0.5 s are spent and at least 3 solves done, or 2 s; at most
+20,000 solves: ``ENOUGH``) of the solve's own time (stiction: ``result.seconds``, the C++ solve and
+its verdict, each after an untimed solve of the problem with A and b scaled by 4, so that no
+factorization carries over from the previous solve of the same problem; Siconos: its
+``fc3d_driver`` call timed in its process); at most ``--time-limit`` seconds per solve (Siconos:
+the helper process is stopped when a request takes 6 times that, at least 5 s). Problems of at
+most 64 rows are timed in 5 rounds, each stiction then every Siconos solver; the reported ratio is
+the median of the rounds' ratios. Settings: tolerance ``--tol`` for every solver, 10,000
 iterations (NSN-AC: 1,000).
 """
 from __future__ import annotations
@@ -27,14 +28,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime
-import json
-import os
 import platform
 import shutil
 import statistics
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -42,55 +39,16 @@ import numpy as np
 
 import stiction
 from stiction import _core, fclib
+from stiction.bench import siconos
+from stiction.bench.profiles import fclib_problem_set
 
-ROOT = Path(__file__).resolve().parents[1]
-SOLVERS = {"NSGS": "SICONOS_FRICTION_3D_NSGS", "NSN-AC": "SICONOS_FRICTION_3D_NSN_AC",
-           "PROX": "SICONOS_FRICTION_3D_PROX"}
-
-WORKER = r"""
-import json, statistics, sys, time
-import numpy as np
-import siconos.numerics as sn
-spec = json.loads(sys.argv[1])
-if spec["dat"]:
-    problem = sn.frictionContact_new_from_filename(spec["dat"])
-else:
-    data = np.load(spec["npz"])
-    W = data["W"]
-    if spec["sparse"]:
-        import scipy.sparse as sp
-        W = sp.csr_matrix(W)
-    problem = sn.FrictionContactProblem(3, W, data["q"], data["mu"])
-n = 3 * problem.numberOfContacts
-ENOUGH
-times, out = [], None
-while True:
-    so = sn.SolverOptions(getattr(sn, spec["solver_id"]))
-    so.iparam[sn.SICONOS_IPARAM_MAX_ITER] = spec["max_iter"]
-    so.dparam[sn.SICONOS_DPARAM_TOL] = spec["tol"]
-    r, u = np.zeros(n), np.zeros(n)
-    t0 = time.perf_counter()
-    info = sn.fc3d_driver(problem, r, u, so)
-    times.append(time.perf_counter() - t0)
-    out = {"r": r.tolist(), "info": int(info), "own_error": float(so.dparam[sn.SICONOS_DPARAM_RESIDU]),
-           "iterations": int(so.iparam[sn.SICONOS_IPARAM_ITER_DONE])}
-    if enough(times, sum(times)):
-        break
-out["seconds"] = statistics.median(times)
-print(json.dumps(out))
-"""
-
+SOLVERS = {name.upper(): name for name in siconos.SOLVERS}  # column name: the driver's solver
 
 # When a solver has been timed enough (the same rule on both sides): 0.5 s of solves and at least 3
 # of them, or 2 s (solves that take seconds), or 20,000 solves. The median of a few-microsecond
 # solve needs hundreds of samples: with at most 5 (the first of them cold) the ratios of the 3-27-row
 # problems moved by up to 3x between runs.
-ENOUGH = """
-def enough(times, spent):
-    return (spent >= 0.5 and len(times) >= 3) or spent >= 2.0 or len(times) >= 20000
-"""
-exec(ENOUGH)
-WORKER = WORKER.replace("ENOUGH", ENOUGH)
+ENOUGH = siconos.Repeats(min_seconds=0.5, min_solves=3, max_seconds=2.0, max_solves=20000)
 
 
 def relative_residual(problem, lam, b) -> float:
@@ -113,7 +71,7 @@ def run_stiction(problem, decoy, tol, time_limit):
         res = stiction.solve(problem, tol=tol, max_iter=10000, time_limit=time_limit)
         wall += time.perf_counter() - t0
         times.append(res.seconds)
-        if enough(times, wall):
+        if ENOUGH.enough(times, wall):
             break
     return statistics.median(times), res
 
@@ -122,28 +80,10 @@ ROUNDS = 5  # rounds of timing for problems of at most SMALL_ROWS rows
 SMALL_ROWS = 64
 
 
-def run_siconos(python, path, P, solver, tol, time_limit, workdir):
-    nc = P.contacts
-    p = fclib._to_stiction_order(nc)  # ours[i] = siconos[p[i]]
-    spec = {"solver_id": SOLVERS[solver], "tol": tol, "max_iter": 1000 if solver == "NSN-AC" else 10000,
-            "dat": str(path) if path.suffix == ".dat" else None, "npz": None, "sparse": False}
-    if spec["dat"] is None:
-        inv = np.argsort(p)
-        W = P.A[np.ix_(inv, inv)]
-        npz = Path(workdir) / f"{path.stem}.npz"
-        if not npz.exists():
-            np.savez(npz, W=W, q=-P.b[inv], mu=P.mu)
-        spec["npz"], spec["sparse"] = str(npz), bool(np.count_nonzero(W) <= 0.1 * W.size)
-    try:
-        out = subprocess.run([python, "-c", WORKER, json.dumps(spec)], capture_output=True, text=True,
-                             timeout=max(5.0, 6 * time_limit))
-    except subprocess.TimeoutExpired:
-        return {"seconds": None, "failure": "time limit"}
-    if out.returncode != 0:
-        return {"seconds": None, "failure": (out.stderr.strip().splitlines() or ["crashed"])[-1][:80]}
-    rec = json.loads(out.stdout.strip().splitlines()[-1])
-    r = np.asarray(rec["r"])
-    rec["lam"] = r[p]
+def run_siconos(server, path, P, solver, tol, time_limit):
+    rec = server.solve(path, P, SOLVERS[solver], tol, ENOUGH, timeout=max(5.0, 6 * time_limit))
+    if "error" in rec:
+        return {"seconds": None, "failure": rec["error"][:80]}
     return rec
 
 
@@ -156,17 +96,15 @@ def main() -> int:
     ap.add_argument("--siconos-python", default="/usr/bin/python3")
     args = ap.parse_args()
     python = shutil.which(args.siconos_python) or args.siconos_python
-    probe = subprocess.run([python, "-c", "import siconos.numerics, scipy"], capture_output=True, text=True) \
-        if os.path.exists(python) else None
-    if probe is None or probe.returncode != 0:
+    if not siconos.usable(python):
         print(f"Siconos is not importable by {args.siconos_python} (apt install python3-siconos python3-scipy); "
               "nothing to compare", file=sys.stderr)
         return 0
-    files = sorted(p for p in (ROOT / "benchmarks" / "fclib").iterdir() if p.suffix in (".hdf5", ".dat"))
+    files = [Path(r["path"]) for r in fclib_problem_set()]  # every bundled FCLib problem, sorted
     if args.only:
         files = [f for f in files if any(f.name.startswith(o) for o in args.only)]
     rows = []
-    with tempfile.TemporaryDirectory() as workdir:
+    with siconos.Server(python) as server:
         for path in files:
             P = fclib.load(path)
             problem = P.problem()
@@ -183,7 +121,7 @@ def main() -> int:
                 row["stiction"] = {"residual": relative_residual(problem, np.asarray(res.lam), P.b),
                                    "claimed": bool(res.converged)}
                 for solver in SOLVERS:
-                    rec = run_siconos(python, path, P, solver, args.tol, args.time_limit, workdir)
+                    rec = run_siconos(server, path, P, solver, args.tol, args.time_limit)
                     if rec.get("seconds") is None:
                         row[solver] = {"residual": None, "claimed": False, "failure": rec["failure"]}
                         per_round[solver].append(None)

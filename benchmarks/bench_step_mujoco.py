@@ -79,7 +79,7 @@ import pinocchio as pin
 
 import stiction
 from stiction.bench import sweep
-from stiction.bench import mujoco_scenes
+from stiction.bench import mujoco_twins
 from stiction.robots import ROBOTS
 from stiction.simulator import PHASES, Simulator
 
@@ -100,23 +100,16 @@ REPEATS, QUICK_REPEATS = 7, 3
 # ---------------------------------------------------------------- MuJoCo scene
 def mujoco_model(scene, impratio: float) -> "mujoco.MjModel":
     """The MuJoCo twin of the stiction scene (see the module docstring for every setting): the
-    robot, feet, ground and actuators from stiction.bench.mujoco_scenes.solo12_spec."""
-    spec = mujoco_scenes.solo12_spec(scene)
-    opt = spec.option
-    opt.timestep = scene.dt
-    opt.gravity = scene.model.gravity.linear
-    opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-    opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
-    opt.iterations = 100
-    opt.tolerance = 1e-10
-    opt.impratio = impratio
+    robot, feet, ground and actuators from stiction.bench.mujoco_twins.solo12_spec, its options
+    from mujoco_twins.accurate_options."""
+    spec = mujoco_twins.solo12_spec(scene)
+    mujoco_twins.accurate_options(spec, scene.dt, scene.model.gravity.linear, impratio)
     return spec.compile()
 
 
 def mujoco_initial_state(model, scene) -> np.ndarray:
     """stiction's q0 as a MuJoCo mjSTATE_INTEGRATION vector, ctrl = the posture."""
-    return mujoco_scenes.solo12_state(model, scene.q0, scene.q_target)
+    return mujoco_twins.solo12_state(model, scene.q0, scene.q_target)
 
 
 @dataclass
@@ -149,9 +142,8 @@ class MujocoRun:
         initial = np.empty(mujoco.mj_stateSize(self.model, physics))
         mujoco.mj_getState(self.model, self.data, initial, physics)
         control = self.data.ctrl.copy().reshape(1, 1, -1)
-        t0 = time.perf_counter()
-        states, _ = mujoco.rollout.rollout(self.model, self.data, initial, control, nstep=self.n_steps)
-        us = (time.perf_counter() - t0) / self.n_steps * 1e6
+        wall, _, states = mujoco_twins.rollout(self.model, self.data, initial, control, self.n_steps)
+        us = wall / self.n_steps * 1e6
         self.q_end = states[0, -1, 1:1 + self.model.nq]  # FULLPHYSICS starts with time, then qpos
         return us
 

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import stiction
 from stiction import fclib
+from stiction.bench.profiles import fclib_problem_set
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def timed_solve(problem, solver, tol, time_limit):
@@ -39,7 +39,7 @@ def main() -> None:
     ap.add_argument("--time-limit", type=float, default=30.0)
     args = ap.parse_args()
     solvers = args.solvers.split(",")
-    files = sorted(p for p in (ROOT / "benchmarks" / "fclib").iterdir() if p.suffix in (".hdf5", ".dat"))
+    files = [Path(r["path"]) for r in fclib_problem_set()]  # every bundled FCLib problem, sorted
     cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")
     head = "| file | contacts | " + " | ".join(f"{s}: rel. residual / it / ms" for s in solvers) + " |"
     lines = [

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from stiction.bench import mujoco_scenes
+from stiction.bench import mujoco_twins
 from stiction.bench import work_precision as wp
 from stiction.cli import main
 
@@ -30,7 +30,7 @@ def _rows(result, scene, method):
 
 def test_quick_sweep_outputs_are_complete_and_finite(quick):
     result, out = quick
-    methods = [m for m in wp.QUICK_METHODS if m not in wp.MUJOCO_METHODS or mujoco_scenes.available()]
+    methods = [m for m in wp.QUICK_METHODS if m not in wp.MUJOCO_METHODS or mujoco_twins.available()]
     # two points per sweep: dt in {1, 10} ms at 1e-10, tolerance in {1e-4, 1e-10} at 1 ms
     assert len(result["rows"]) == len(wp.QUICK_SCENES) * len(methods) * 3
     assert result["command"].startswith("stiction bench work-precision --quick")
@@ -63,7 +63,7 @@ def test_incline_stick_exact_holds_and_the_soft_methods_drift(quick):
     assert exact < 1e-7
     penalty = min(r["error"] for r in _rows(result, "cube-incline-stick", "penalty"))
     assert penalty > 1e-6 and penalty > 1e3 * exact
-    if mujoco_scenes.available():
+    if mujoco_twins.available():
         mj = min(r["error"] for r in _rows(result, "cube-incline-stick", "mujoco-default"))
         assert mj > 1e-4 and mj > 1e3 * exact
 

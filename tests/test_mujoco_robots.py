@@ -1,4 +1,4 @@
-"""The MuJoCo twin of every bundled robot scene (stiction.bench.mujoco_robots) is the same robot:
+"""The MuJoCo twin of every bundled robot scene (stiction.bench.mujoco_twins.mujoco_twin) is the same robot:
 same moving mass, joint frames and mass matrix at any configuration, the same contact gaps in the
 standing posture, the same kinetic energy for any velocity; MuJoCo keeps each robot standing."""
 from __future__ import annotations
@@ -17,7 +17,7 @@ from stiction.scene import load_scene
 mujoco = pytest.importorskip("mujoco")
 import mujoco.rollout  # noqa: E402
 
-from stiction.bench import mujoco_robots  # noqa: E402
+from stiction.bench import mujoco_twins  # noqa: E402
 
 SCENES = ("solo12-stand", "go2-stand", "anymal-stand", "talos-stand", "ur5-push-wall", "ur5-push-box",
           "solo12-on-board")
@@ -29,7 +29,7 @@ def twins():
     out = {}
     for name in SCENES:
         scene = load_scene(name)
-        out[name] = (scene, mujoco_robots.mujoco_twin(scene))
+        out[name] = (scene, mujoco_twins.mujoco_twin(scene))
     return out
 
 
@@ -96,7 +96,7 @@ def test_same_contact_heights_in_the_initial_posture(twins, name):
 
     sim = Simulator(scene)
     centres = sim.contact_centers(type("T", (), {"q": scene.q0[None]})())[0]
-    local, gaps = mujoco_robots.contact_geometry(scene, scene.q0)
+    local, gaps = mujoco_twins.contact_geometry(scene, scene.q0)
     for k, c in enumerate(scene.contacts):  # the Python yardstick agrees with the C++ centres
         h = scene.halfspaces[c.halfspace]
         if h.frame == 0:
@@ -124,9 +124,9 @@ def test_mujoco_keeps_the_robot_standing(twins, name):
                                        twin.ctrl.reshape(1, 1, -1), nstep=n)
     Q = np.vstack([scene.q0, twin.q_from_qpos(states[0, :, 1:1 + m.nq], scene.model.nq)])
     assert np.isfinite(Q).all()
-    _, gaps = mujoco_robots.contact_geometry(scene, Q[-50:])
+    _, gaps = mujoco_twins.contact_geometry(scene, Q[-50:])
     assert gaps.max() < 1e-3, "a contact opened"
-    acc = mujoco_robots.contact_accuracy(scene, np.arange(n + 1) * scene.dt, Q, settle=0.0)
+    acc = mujoco_twins.contact_accuracy(scene, np.arange(n + 1) * scene.dt, Q, settle=0.0)
     assert 1e-6 < acc["penetration"] < 1e-2  # soft: mm, not exact, and not sinking through
     if name in STANDING:
         assert abs(Q[-1, 2] - Q[0, 2]) < 0.02
@@ -142,7 +142,7 @@ def test_accuracy_yardstick_on_a_known_motion():
     Q = np.tile(scene.q0, (len(t), 1))
     Q[1:, 2] -= 0.002
     Q[:, 1] += np.where(t > scene.settle_time, 0.003 * (t - scene.settle_time) / 0.5, 0.0)
-    acc = mujoco_robots.contact_accuracy(scene, t, Q)
+    acc = mujoco_twins.contact_accuracy(scene, t, Q)
     assert acc["penetration"] == pytest.approx(0.002, abs=1e-12)
     assert acc["drift"] == pytest.approx(0.003, abs=1e-12)
     assert acc["closed"] == 4
@@ -151,13 +151,13 @@ def test_accuracy_yardstick_on_a_known_motion():
 def test_errors_name_what_is_wrong():
     scene = load_scene("solo12-stand")
     with pytest.raises(ValueError, match="impratio"):
-        mujoco_robots.mujoco_twin(scene, impratio=0.5)
+        mujoco_twins.mujoco_twin(scene, impratio=0.5)
     with pytest.raises(ValueError, match="coal collision pairs"):
-        mujoco_robots.mujoco_twin(dataclasses.replace(scene, pairs=[object()]))
+        mujoco_twins.mujoco_twin(dataclasses.replace(scene, pairs=[object()]))
     with pytest.raises(ValueError, match="mode"):
-        mujoco_robots.mujoco_twin(dataclasses.replace(scene, mode="rk4"))
+        mujoco_twins.mujoco_twin(dataclasses.replace(scene, mode="rk4"))
     with pytest.raises(ValueError, match="nq = 19"):
-        mujoco_robots.contact_geometry(scene, np.zeros((2, 7)))
+        mujoco_twins.contact_geometry(scene, np.zeros((2, 7)))
 
 
 def test_bench_script_runs_and_reports_every_scene_asked(capsys):

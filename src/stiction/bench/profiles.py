@@ -6,7 +6,7 @@ dumps from its own simulations (:func:`robot_problem_set`: standing, slipping, i
 stacks; one FCLib file per step, cached under ``--problems``). Solvers: ours (default, nsgs, admm, newton,
 exact law eq. 65), Pinocchio's ADMM and PGS (:mod:`stiction.baselines`, its NCP with De Saxcé's
 correction) and, when Debian's python3-siconos is importable by ``/usr/bin/python3``, Siconos'
-NSGS, NSN-AC and PROX (one helper process, timed there).
+NSGS, NSN-AC and PROX (:mod:`stiction.bench.siconos`: one helper process, timed there).
 
 Every answer is judged by one yardstick, whatever the solver claims: ``residual`` = the natural
 map of the exact law at λ relative to ‖b‖ (:func:`stiction.exact_law_measures`, eq. 65, on the
@@ -23,14 +23,14 @@ import functools
 import json
 import math
 import os
-import select
 import statistics
-import subprocess
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+from . import siconos
+from .siconos import usable as siconos_usable
 
 NAME = "profiles"
 HELP = "solvers alone on FCLib and robot problem sets: performance/data profiles, false convergence"
@@ -45,8 +45,7 @@ PINOCCHIO = ("pinocchio-admm", "pinocchio-pgs", "pinocchio-admm-tight", "pinocch
 # median 6-7 tol by the exact law's relative residual on the robot set. "-tight" asks it for
 # tol / TIGHT and is still judged at tol: what it costs Pinocchio to actually meet tol.
 TIGHT = 100.0
-SICONOS = {"siconos-nsgs": "SICONOS_FRICTION_3D_NSGS", "siconos-nsn-ac": "SICONOS_FRICTION_3D_NSN_AC",
-           "siconos-prox": "SICONOS_FRICTION_3D_PROX"}
+SICONOS = {f"siconos-{name}": solver_id for name, solver_id in siconos.SOLVERS.items()}
 ALL_SOLVERS = OURS + PINOCCHIO + tuple(SICONOS)
 QUICK_SOLVERS = ("default", "nsgs", "admm", "pinocchio-admm", "pinocchio-pgs")
 TOLS = (1e-4, 1e-8)
@@ -216,17 +215,6 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the robot problem set (default 0)")
 
 
-def siconos_usable(python: str = "/usr/bin/python3") -> bool:
-    """Debian's python3-siconos (with scipy) importable by the system Python."""
-    if not os.path.exists(python):
-        return False
-    try:
-        out = subprocess.run([python, "-c", "import siconos.numerics, scipy"], capture_output=True, timeout=60)
-    except (OSError, subprocess.SubprocessError):
-        return False
-    return out.returncode == 0
-
-
 def cases(args) -> list[dict]:
     quick = bool(getattr(args, "quick", False))
     # an option given empty is an error naming it, never the default
@@ -329,96 +317,7 @@ def _solve_pinocchio(problem, method, tol, limit, budget):
     return seconds, r.lam, bool(r.converged), int(r.iterations)
 
 
-SICONOS_SERVER = r"""
-import json, statistics, sys, time
-import numpy as np
-import siconos.numerics as sn
-for line in sys.stdin:
-    spec = json.loads(line)
-    try:
-        if spec["dat"]:
-            problem = sn.frictionContact_new_from_filename(spec["dat"])
-        else:
-            data = np.load(spec["npz"])
-            W = data["W"]
-            if np.count_nonzero(W) <= 0.1 * W.size:
-                import scipy.sparse as sp
-                W = sp.csr_matrix(W)
-            problem = sn.FrictionContactProblem(3, W, data["q"], data["mu"])
-        n = 3 * problem.numberOfContacts
-        times, out, spent = [], None, 0.0
-        while True:
-            so = sn.SolverOptions(getattr(sn, spec["solver_id"]))
-            so.iparam[sn.SICONOS_IPARAM_MAX_ITER] = spec["max_iter"]
-            so.dparam[sn.SICONOS_DPARAM_TOL] = spec["tol"]
-            r, u = np.zeros(n), np.zeros(n)
-            t0 = time.perf_counter()
-            info = sn.fc3d_driver(problem, r, u, so)
-            times.append(time.perf_counter() - t0)
-            spent += times[-1]
-            out = {"r": r.tolist(), "info": int(info), "iterations": int(so.iparam[sn.SICONOS_IPARAM_ITER_DONE])}
-            if spent >= spec["budget"] or len(times) >= 5:
-                break
-        out["seconds"] = statistics.median(times)
-    except Exception as exc:
-        out = {"error": f"{type(exc).__name__}: {exc}"[:120]}
-    print(json.dumps(out), flush=True)
-"""
-
-
-class _Siconos:
-    """One /usr/bin/python3 process serving Siconos solves over stdin/stdout (a process per solve
-    would cost its ~0.5 s start-up every time); stopped and restarted when a solve overruns."""
-
-    def __init__(self, python: str = "/usr/bin/python3"):
-        self.python, self.proc = python, None
-        self.tmp = tempfile.TemporaryDirectory(prefix="stiction-siconos-")
-
-    def _start(self):
-        self.proc = subprocess.Popen([self.python, "-c", SICONOS_SERVER], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, bufsize=1)
-
-    def stop(self):
-        if self.proc is not None:
-            self.proc.kill()
-            self.proc.wait()
-            self.proc = None
-
-    def solve(self, path: str, P, solver: str, tol: float, limit: float, budget: float) -> dict:
-        from .. import fclib
-
-        spec = {"solver_id": SICONOS[solver], "tol": tol, "budget": budget,
-                "max_iter": 1000 if solver == "siconos-nsn-ac" else MAX_ITERATIONS,
-                "dat": path if path.endswith(".dat") else None, "npz": None}
-        if spec["dat"] is None:  # Siconos' Python cannot read FCLib HDF5: W, q, mu in (n, t1, t2) order
-            inv = np.argsort(fclib._to_stiction_order(P.contacts))
-            npz = os.path.join(self.tmp.name, f"{abs(hash(path))}.npz")
-            if not os.path.exists(npz):
-                np.savez(npz, W=P.A[np.ix_(inv, inv)], q=-P.b[inv], mu=P.mu)
-            spec["npz"] = npz
-        startup = 0.0
-        if self.proc is None or self.proc.poll() is not None:
-            self._start()
-            startup = 10.0  # importing numpy, scipy and siconos
-        self.proc.stdin.write(json.dumps(spec) + "\n")
-        self.proc.stdin.flush()
-        # the request: repeats stop once `budget` is spent, so one over-long solve shows as a run
-        # past limit + budget (plus loading the problem)
-        deadline = time.monotonic() + 1.2 * limit + budget + 1.0 + startup
-        line = ""
-        while time.monotonic() < deadline:
-            ready, _, _ = select.select([self.proc.stdout], [], [], max(0.0, deadline - time.monotonic()))
-            if ready:
-                line = self.proc.stdout.readline()
-                break
-        if not line:
-            crashed = self.proc.poll() is not None
-            self.stop()
-            return {"error": "crashed" if crashed else "time limit"}
-        return json.loads(line)
-
-
-_siconos: _Siconos | None = None
+_siconos: siconos.Server | None = None
 
 
 class _Failure(Exception):
@@ -426,20 +325,16 @@ class _Failure(Exception):
 
 
 def _solve_siconos(path, P, solver, tol, limit, budget):
+    """Repeats stop once `budget` is spent (at most 5), so one over-long solve shows as a request
+    past limit + budget (plus loading the problem): the helper is stopped then."""
     global _siconos
     if _siconos is None:
-        _siconos = _Siconos()
-    out = _siconos.solve(path, P, solver, tol, limit, budget)
+        _siconos = siconos.Server()
+    out = _siconos.solve(path, P, solver.removeprefix("siconos-"), tol, siconos.Repeats(min_seconds=budget),
+                         timeout=1.2 * limit + budget + 1.0)
     if "error" in out:
         raise _Failure(out["error"])
-    p = _to_ours(P.contacts)
-    return out["seconds"], np.asarray(out["r"])[p], out["info"] == 0, out["iterations"]
-
-
-def _to_ours(nc: int) -> np.ndarray:
-    from ..fclib import _to_stiction_order
-
-    return _to_stiction_order(nc)
+    return out["seconds"], out["lam"], out["info"] == 0, out["iterations"]
 
 
 def evaluate(case: dict) -> dict:

@@ -9,7 +9,8 @@ each block, and the median of those 10 (stiction: its per-step C++ timings, whic
 recording; MuJoCo 4.0, the optional ``bench`` extra: wall clock around its ``mj_step`` calls). A
 step that takes long (a hard solve) counts in its block's mean, as MuJoCo's do, while one noisy
 block does not move the median. MuJoCo runs the same scene when it is importable: free boxes on
-a plane, elliptic cones, Newton, tolerance 1e-10, the same masses, mu and dt.
+a plane, elliptic cones, Newton, tolerance 1e-10, the same masses, mu and dt
+(:func:`stiction.bench.mujoco_twins.cube_array_spec`).
 
 The fitted exponent is the least-squares slope of log(us_per_step) against log(contacts).
 """
@@ -43,28 +44,14 @@ print(json.dumps({"us_per_step": float(np.median([b.mean() for b in blocks])), "
 LAYOUTS = ("grid", "tower")
 
 
-def mujoco_grid_xml(cubes: int, spacing: float = 0.2, layout: str = "grid") -> str:
-    per_row = math.ceil(math.sqrt(cubes))
-    rows = math.ceil(cubes / per_row)
-    bodies = []
-    for k in range(cubes):
-        if layout == "tower":
-            x, y, z = 0.0, 0.0, 0.05 + 0.1 * k
-        else:
-            i, j = divmod(k, per_row)
-            x, y, z = (j - (per_row - 1) / 2) * spacing, (i - (rows - 1) / 2) * spacing, 0.05
-        bodies.append(f'<body pos="{x} {y} {z}"><freejoint/><geom type="box" size="0.05 0.05 0.05" mass="1"/></body>')
-    return f"""<mujoco><option timestep="0.001" cone="elliptic" solver="Newton" tolerance="1e-10" iterations="100"/>
-<default><geom friction="0.5 0 0" condim="3"/></default>
-<worldbody><geom type="plane" size="10 10 0.1"/>{''.join(bodies)}</worldbody></mujoco>"""
-
-
 def mujoco_us_per_step(cubes: int, steps: int, warmup: int, layout: str = "grid") -> float | None:
-    try:
-        import mujoco
-    except ImportError:
+    from . import mujoco_twins
+
+    if not mujoco_twins.available():
         return None
-    model = mujoco.MjModel.from_xml_string(mujoco_grid_xml(cubes, layout=layout))
+    import mujoco
+
+    model = mujoco_twins.cube_array_spec(cubes, layout).compile()
     data = mujoco.MjData(model)
     for _ in range(warmup):
         mujoco.mj_step(model, data)

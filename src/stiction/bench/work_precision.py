@@ -34,7 +34,7 @@ K = 1e5, pinocchio-admm, pinocchio-pgs, pinocchio-admm-ccp; time stepping eq. 65
 and cold (``-cold``; budget 10000 iterations), the relaxed ODE (eq. 64) with RK4 steps
 (``ode-rk4``) and adaptive steps (``ode-adaptive``: its ``tol`` is the local error tolerance,
 ``dt`` the first step, the contact solver at 1e-10), and MuJoCo 4.0 when importable
-(``mujoco-default``, ``-stiff``, ``-impratio10``, ``-noslip``: bench/mujoco_scenes.py).
+(``mujoco-default``, ``-stiff``, ``-impratio10``, ``-noslip``: bench/mujoco_twins.py).
 
 **Sweeps**: dt over 0.1 ... 20 ms at tolerance 1e-10, and the tolerance over 1e-4 ... 1e-10 at
 dt = 1 ms (``--quick``: two points each, a few scenes and methods).
@@ -360,7 +360,7 @@ def _mujoco_model(case: dict, sc):
     """(model, initial state, bodies to follow, geoms to follow) of the scene's MuJoCo twin."""
     import mujoco  # noqa: PLC0415
 
-    from . import mujoco_scenes as ms  # noqa: PLC0415
+    from . import mujoco_twins as ms  # noqa: PLC0415
 
     name, variant = case["scene"], MUJOCO_METHODS[case["method"]]
     kind = SCENES[name].kind
@@ -400,7 +400,7 @@ def _mujoco_model(case: dict, sc):
 
 
 def _run_mujoco(case: dict, sc) -> dict:
-    from . import mujoco_scenes as ms  # noqa: PLC0415
+    from . import mujoco_twins as ms  # noqa: PLC0415
 
     dt, duration = case["dt"], case["duration"]
     model, state, bodies, feet = _mujoco_model(case, sc)
@@ -472,7 +472,7 @@ def add_arguments(parser) -> None:
 
 
 def cases(args) -> list[dict]:
-    from . import mujoco_scenes as ms  # noqa: PLC0415
+    from . import mujoco_twins as ms  # noqa: PLC0415
 
     quick = bool(getattr(args, "quick", False))
     scenes, methods = getattr(args, "scenes", None), getattr(args, "methods", None)
