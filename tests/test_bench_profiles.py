@@ -155,6 +155,16 @@ def test_bad_options_are_loud(problem_dir):
             profiles.cases(_args(problem_dir, *bad))
 
 
+def test_an_option_given_empty_is_an_error_naming_it(problem_dir):
+    """`--sets ""` (or only commas) used to run the default sets; the same for --solvers and --tols."""
+    for bad, match in ((["--sets", ""], "--sets"), (["--sets", " , "], "--sets"),
+                       (["--sets", "fclib", "--solvers", ""], "--solvers"),
+                       (["--sets", "fclib", "--tols", ""], "--tols"), (["--sets", "fclib", "--tols", "abc"], "--tols")):
+        with pytest.raises(ValueError, match=match):
+            profiles.cases(_args(problem_dir, *bad))
+    assert cli.main(["bench", "profiles", "--quick", "--sets", "", "--json"]) == 2
+
+
 def test_a_cache_from_another_recipe_is_rebuilt(tmp_path, monkeypatch):
     first = profiles.robot_problem_set(tmp_path, quick=True)
     monkeypatch.setattr(profiles, "QUICK_ROBOT_SCENES", ("cube-incline-slip",))

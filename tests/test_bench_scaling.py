@@ -43,3 +43,18 @@ def test_tower_layout_stacks_the_cubes(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["bench", "scaling", "--layout", "pile", "--json"])
     assert exc.value.code == 2 and "invalid choice: 'pile'" in capsys.readouterr().err
+
+
+def test_steps_must_be_positive_and_an_explicit_value_is_honoured(capsys):
+    """--steps 0 is an error naming the flag (with --quick it used to run 50); --quick --steps 7 runs 7."""
+    from stiction.cli import build_parser
+
+    for bad in ("0", "-3", "2.5"):
+        with pytest.raises(SystemExit) as exc:
+            main(["bench", "scaling", "--quick", "--steps", bad, "--json"])
+        assert exc.value.code == 2 and "--steps" in capsys.readouterr().err
+    parse = build_parser().parse_args
+    assert {c["steps"] for c in scaling.cases(parse(["bench", "scaling", "--quick", "--steps", "7"]))} == {7}
+    assert {c["steps"] for c in scaling.cases(parse(["bench", "scaling", "--quick"]))} == {50}
+    assert {c["steps"] for c in scaling.cases(parse(["bench", "scaling", "--steps", "9"]))} == {9}
+    assert {c["steps"] for c in scaling.cases(parse(["bench", "scaling"]))} == {200}

@@ -118,6 +118,19 @@ def test_bad_input_is_loud():
         st.stack_scene(-1.0, False)
 
 
+def test_an_option_given_empty_is_an_error_naming_it(capsys):
+    """`--methods ""` and `--maps ""` used to run the defaults (every method, every map)."""
+    from stiction.cli import main
+
+    for maps, methods, flag in (("incline", "", "--methods"), ("", "exact", "--maps"), ("incline", ",", "--methods")):
+        with pytest.raises(ValueError, match=flag):
+            st.cases(argparse.Namespace(quick=True, maps=maps, methods=methods))
+    assert main(["bench", "stability", "--quick", "--maps", "incline", "--methods", "", "--json"]) == 2
+    assert "--methods" in capsys.readouterr().err
+    assert main(["bench", "stability", "--quick", "--maps", "", "--json"]) == 2
+    assert "--maps" in capsys.readouterr().err
+
+
 def test_quick_sweep_through_the_cli_writes_csv_png_and_finite_rows(tmp_path, capsys):
     """`stiction bench stability --quick --json --out DIR`: the CSV's columns are FIELDS, one row per
     case, finite numbers, a chart per map; a second run resumes (every case already in the CSV)."""
@@ -219,3 +232,148 @@ def test_pile_geometry_and_exact_rest():
     r = run("pile", "exact", 24, 1e-8)
     assert r["failure"] is None, r
     assert r["drift"] < 1e-9 and r["tilt_deg"] < 1e-6
+
+
+# ---- each failure criterion at its documented threshold (docs/benchmarks.md, module docstring) --------
+# The thresholds are written out here as numbers on purpose: a criterion loosened in the code (a
+# constant changed) must fail these tests. Each takes a synthetic trajectory of the 1 kg, 10 cm cube
+# through `measures` and `classify`, once just past the threshold and once just inside.
+
+def _cube():
+    from stiction.scene import load_scene
+
+    return load_scene("cube-slide")  # 1 kg, 10 cm, on flat ground (gravity -z)
+
+
+def _synthetic(scene, t, p, v=None, rot=None):
+    """A trajectory of the free cube: centre p (N, 3), world velocity v (N, 3), rotations rot (N, 3, 3)."""
+    import types
+
+    n = len(t)
+    q = np.tile(scene.q0, (n, 1)).astype(float)
+    q[:, :3] = p
+    if rot is not None:
+        import pinocchio as pin
+
+        q[:, 3:7] = [pin.Quaternion(R).coeffs() for R in rot]  # x, y, z, w
+    vel = np.zeros((n, scene.model.nv))
+    if v is not None:  # the free-flyer velocity is in the body frame: rotate back when rotated
+        vel[:, :3] = v if rot is None else np.einsum("nji,nj->ni", rot, v)
+    return types.SimpleNamespace(t=np.asarray(t, float), q=q, v=vel)
+
+
+def _failures(scene, traj, checks=None, **row):
+    """classify() of a clean row (nothing else fires) updated by the measures of `traj`."""
+    base = {"anchored": False, "stick": [], "stick_relative": None, "slide": None, "stacked": False,
+            "boundary": None}
+    meas = st.measures(scene, traj, {**base, **(checks or {})}, float(traj.t[-1] - traj.t[0]))
+    full = {"error": None, "unconverged_steps": 0, "residual": 0.0, "penetration": 0.0, **meas,
+            "_fell": meas.pop("fell"), **row}
+    return st.classify(full), meas
+
+
+@pytest.mark.parametrize("factor,fires", [(1.01, True), (0.99, False)])
+def test_energy_gain_fires_above_one_percent(factor, fires):
+    """E = m g z_com + kinetic: a cube at rest 5 cm up (E0 = 0.4905 J) given a speed whose kinetic
+    energy is factor x 1 % of E0 at the last record."""
+    sc = _cube()
+    e0 = 1.0 * 9.81 * 0.05
+    speed = math.sqrt(2 * factor * 0.01 * e0 / 1.0)
+    t = np.linspace(0.0, 1.0, 11)
+    p = np.tile([0.0, 0.0, 0.05], (11, 1))
+    v = np.zeros((11, 3))
+    v[-1, 0] = speed
+    fails, meas = _failures(sc, _synthetic(sc, t, p, v))
+    assert meas["energy_gain"] == pytest.approx(factor * 0.01, rel=1e-9)
+    assert ("energy-gain" in fails) == fires, fails
+
+
+@pytest.mark.parametrize("duration", [2.0, 0.5])
+@pytest.mark.parametrize("factor,fires", [(1.01, True), (0.99, False)])
+def test_stiction_violated_fires_above_ten_micrometres_per_two_seconds(duration, factor, fires):
+    """Where the exact law sticks: a horizontal drift of factor x 10 µm x duration / 2 s."""
+    sc = _cube()
+    t = np.linspace(0.0, duration, 21)
+    drift = factor * 10e-6 * duration / 2.0
+    p = np.tile([0.0, 0.0, 0.05], (21, 1))
+    p[:, 0] = drift * np.sin(np.linspace(0, math.pi / 2, 21)) * 0.6
+    p[:, 1] = drift * np.sin(np.linspace(0, math.pi / 2, 21)) * 0.8  # along (0.6, 0.8): a norm, not a component
+    fails, meas = _failures(sc, _synthetic(sc, t, p), {"stick": [0]})
+    assert meas["drift"] == pytest.approx(drift, rel=1e-9)
+    assert ("stiction-violated" in fails) == fires, fails
+
+
+def _sliding(a_true, lateral_speed, duration=2.0):
+    """The cube sliding from rest along +x at a_true, with a constant lateral speed along y."""
+    t = np.linspace(0.0, duration, 201)
+    p = np.stack([a_true * t * t / 2, lateral_speed * t, np.full_like(t, 0.05)], axis=1)
+    v = np.stack([a_true * t, np.full_like(t, lateral_speed), np.zeros_like(t)], axis=1)
+    return t, p, v
+
+
+@pytest.mark.parametrize("angle,fires", [(1.01, True), (0.99, False)])
+def test_sliding_wrong_fires_when_the_direction_is_more_than_one_degree_off(angle, fires):
+    """The acceleration along x is right; a constant lateral speed turns the displacement by `angle` degrees."""
+    sc = _cube()
+    a, T = 2.0, 2.0
+    t, p, v = _sliding(a, math.tan(math.radians(angle)) * a * T / 2, T)
+    slide = {"bodies": [0], "accel": np.array([a, 0.0, 0.0]), "v0": 0.0}
+    fails, meas = _failures(sc, _synthetic(sc, t, p, v), {"slide": slide})
+    assert meas["direction_error_deg"] == pytest.approx(angle, rel=1e-9)
+    assert meas["accel_error"] < 1e-12
+    assert ("sliding-wrong" in fails) == fires, fails
+
+
+@pytest.mark.parametrize("factor,fires", [(1.0101, True), (1.0099, False), (0.9899, True), (0.9901, False)])
+def test_sliding_wrong_fires_when_the_acceleration_is_more_than_one_percent_off(factor, fires):
+    sc = _cube()
+    t, p, v = _sliding(2.0 * factor, 0.0)
+    slide = {"bodies": [0], "accel": np.array([2.0, 0.0, 0.0]), "v0": 0.0}
+    fails, meas = _failures(sc, _synthetic(sc, t, p, v), {"slide": slide})
+    assert meas["accel_error"] == pytest.approx(abs(factor - 1), rel=1e-6)
+    assert meas["direction_error_deg"] < 1e-9
+    assert ("sliding-wrong" in fails) == fires, fails
+
+
+@pytest.mark.parametrize("angle,fires", [(5.05, True), (4.95, False)])
+def test_structure_lost_fires_above_five_degrees_of_tilt(angle, fires):
+    import pinocchio as pin
+
+    sc = _cube()
+    t = np.linspace(0.0, 1.0, 11)
+    p = np.tile([0.0, 0.0, 0.05], (11, 1))
+    axis = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
+    rot = np.stack([pin.exp3(axis * math.radians(angle) * k / 10) for k in range(11)])
+    fails, meas = _failures(sc, _synthetic(sc, t, p, rot=rot))
+    assert meas["tilt_deg"] == pytest.approx(angle, rel=1e-6)
+    assert ("structure-lost" in fails) == fires, fails
+
+
+@pytest.mark.parametrize("criterion,field,past,inside", [
+    ("residual", "residual", 1.01e-6, 0.99e-6),
+    ("penetration", "penetration", 1.01e-3, 0.99e-3),  # max(1 mm, 1 % of the 10 cm cube) = 1 mm
+    ("energy-gain", "energy_gain", 0.0101, 0.0099),
+    ("structure-lost", "tilt_deg", 5.05, 4.95),
+])
+def test_each_threshold_of_classify(criterion, field, past, inside):
+    """classify() alone at the documented thresholds (a row that passes everything else)."""
+    row = {"error": None, "unconverged_steps": 0, "residual": 0.0, "penetration": 0.0, "energy_gain": 0.0,
+           "drift": None, "drift_limit": None, "accel_error": None, "direction_error_deg": None, "tilt_deg": 0.0}
+    assert st.classify({**row, field: past}) == [criterion]
+    assert st.classify({**row, field: inside}) == []
+
+
+@pytest.mark.parametrize("shift,fires", [(0.0505, True), (0.0495, False)])
+def test_structure_lost_fires_when_the_top_cube_leaves_half_a_width(shift, fires):
+    """The two-cube stack: the top cube's centre `shift` m sideways of the bottom one's (half the
+    10 cm width is the limit); nothing else moves or tilts."""
+    import types
+
+    sc = st.stack_scene(1.0, False)
+    t = np.linspace(0.0, 1.0, 11)
+    q = np.tile(sc.q0, (11, 1)).astype(float)
+    q[:, 7] += shift * t  # body 1 (the top cube): x of its free flyer
+    traj = types.SimpleNamespace(t=t, q=q, v=np.zeros((11, sc.model.nv)))
+    fails, meas = _failures(sc, traj, {"stacked": True})
+    assert meas["tilt_deg"] < 1e-9
+    assert ("structure-lost" in fails) == fires, fails

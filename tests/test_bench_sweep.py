@@ -118,3 +118,100 @@ def test_bench_all_needs_a_folder_and_unknown_benches_are_refused(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["bench", "speed"])
     assert exc.value.code == 2 and "invalid choice" in capsys.readouterr().err
+
+
+def test_a_line_cut_mid_write_is_dropped_never_glued(tmp_path):
+    """An interrupted sweep leaves its last row cut short, without a newline: resuming drops that
+    fragment (its case runs again) and starts the next row on a line of its own."""
+    calls = []
+    bench = _toy_bench(calls)
+    # the row of x = 2 cut after its first character: glued, "2" + "2,p2,4.0,False" would read as x = 22
+    with open(tmp_path / "toy.csv", "w", newline="") as fh:
+        fh.write("x,label,square,failed\r\n1,p1,1.0,False\r\n2")
+    sweep.run(bench, _args(tmp_path, [1, 2, 3]), "c")
+    assert calls == [2, 3]
+    with open(tmp_path / "toy.csv", newline="") as fh:
+        table = list(csv.reader(fh))
+    assert table == [list(bench.FIELDS), ["1", "p1", "1.0", "False"], ["2", "p2", "4.0", "False"],
+                     ["3", "p3", "9.0", "False"]]
+    again = sweep.run(bench, _args(tmp_path, [1, 2, 3]), "c")
+    assert calls == [2, 3] and again["resumed"] == 3  # nothing runs twice
+    # a header cut short (the run stopped while writing it): the file starts over
+    calls.clear()
+    with open(tmp_path / "toy.csv", "w", newline="") as fh:
+        fh.write("x,lab")
+    sweep.run(bench, _args(tmp_path, [5]), "c")
+    assert calls == [5]
+    assert [r["x"] for r in sweep.read_csv(tmp_path / "toy.csv", bench.FIELDS)] == [5]
+    # a complete file is left alone (a row ending in \r\n, or \n from another writer)
+    before = (tmp_path / "toy.csv").read_bytes()
+    assert not sweep.drop_partial_last_line(tmp_path / "toy.csv") and (tmp_path / "toy.csv").read_bytes() == before
+
+
+def _run_main_in_thread(argv, limit):
+    """main(argv) on a daemon thread: (finished within `limit` s, exit code)."""
+    import threading
+
+    result = {}
+    worker = threading.Thread(target=lambda: result.setdefault("code", main(argv)), daemon=True)
+    worker.start()
+    worker.join(limit)
+    return not worker.is_alive(), result.get("code")
+
+
+def test_cluster_that_is_not_a_dask_scheduler_is_refused_quickly(tmp_path, capsys, monkeypatch):
+    """--cluster at a port that accepts and stays silent (Client() waited for ever), at one that
+    answers in another protocol (its bytes read as a frame length: 'Unable to allocate 3.07 EiB'),
+    and at malformed addresses: exit 2 with a message naming --cluster, before any file is written.
+    Time is the subject (it used to hang): the bound is generous, the connect timeout 1 s here."""
+    import socket
+    import threading
+
+    pytest.importorskip("distributed")
+    monkeypatch.setattr(sweep, "CLUSTER_CONNECT_TIMEOUT", 1.0, raising=False)  # (absent before the check)
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen(8)  # the kernel completes the handshake; nobody ever answers
+    talker = socket.socket()
+    talker.bind(("127.0.0.1", 0))
+    talker.listen(8)
+    talker.settimeout(30)
+
+    def answer_in_http():
+        try:
+            while True:
+                conn, _ = talker.accept()
+                conn.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n" * 4)
+        except OSError:
+            return
+
+    threading.Thread(target=answer_in_http, daemon=True).start()
+    try:
+        for address in (f"tcp://127.0.0.1:{silent.getsockname()[1]}", f"127.0.0.1:{talker.getsockname()[1]}",
+                        "garbage", "tcp://127.0.0.1:notaport", "http://127.0.0.1:8786", " "):
+            out = tmp_path / "out"
+            finished, code = _run_main_in_thread(["bench", "scaling", "--sizes", "4", "--steps", "3", "--json",
+                                                  "--out", str(out), "--cluster", address], 30.0)
+            assert finished, f"--cluster {address!r}: still connecting after 30 s"
+            err = capsys.readouterr().err
+            assert code == 2 and "--cluster" in err, (address, code, err)
+            assert "internal error" not in err and "EiB" not in err
+            assert not out.exists()  # refused before the folder or its CSV
+    finally:
+        silent.close()
+        talker.close()
+
+
+def test_cluster_at_a_real_scheduler_address_runs_and_a_worker_is_refused(capsys):
+    """The connect check lets a scheduler through (an in-process LocalCluster's address) and
+    refuses a Dask worker's address: it answers in Dask's protocol, but is not a scheduler."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        sweep.check_scheduler(cluster.scheduler_address, 5.0)
+        worker = next(iter(cluster.workers.values())).address
+        with pytest.raises(ValueError, match="as Worker, not a Dask scheduler"):
+            sweep.check_scheduler(worker, 5.0)
+        assert main(["bench", "scaling", "--sizes", "4", "--steps", "3", "--json",
+                     "--cluster", cluster.scheduler_address]) == 0
+        assert [r["contacts"] for r in json.loads(capsys.readouterr().out)["rows"]] == [4]

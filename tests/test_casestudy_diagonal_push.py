@@ -9,6 +9,7 @@ import pytest
 
 from stiction import cli
 from stiction.casestudies import diagonal_push as cs
+from stated_checks import assert_checks_as_stated
 
 
 @pytest.fixture(scope="module")
@@ -31,9 +32,26 @@ def box_prediction(phi, r, inscribed=False):
     return math.pi / 4 - psi, math.degrees(psi)
 
 
+# The module's checks as this file states them (docs/casestudies/diagonal-push.md): pattern,
+# expected, tolerance, kind. Measured (quick run): exact directions 5e-15 rad, pyramids vs their
+# geometry <= 4e-10 rad, sliding directions <= 1.2e-8 deg, sticking drift 1.8e-14 m, smallest
+# slide 2.2e-3 m, yaw 2.5e-13 rad.
+STATED = [
+    (r"^[\w-]+: points misclassified", 0.0, 0.0, "=="),
+    (r"^exact: largest friction direction error", 0.0, 1e-6, "<="),
+    (r"^exact: largest per-contact friction direction error", 0.0, 1e-6, "<="),
+    (r"^[\w-]+: max \|sliding direction - direction of F - P\(F\)\| \[deg\]", 0.0, 1e-4, "=="),
+    (r"^pyramid-\d+(-inscribed)?: max \|direction error", 0.0, 1e-6, "=="),
+    (r"^largest window displacement of a sticking run", 0.0, 1e-8, "<="),  # 1e-6 m / 100
+    (r"^smallest window displacement of a sliding run", 1e-4, 0.0, ">="),  # 1e-6 m x 100
+    (r"^largest yaw of the cube", 0.0, 1e-7, "<="),
+]
+
+
 def test_every_check_passes(result):
     failed = [(c.quantity, c.measured, c.expected) for c in result.checks if not c.passed]
     assert not failed
+    assert_checks_as_stated(result, STATED)
     assert result.name == "diagonal-push"
     labels = {c.quantity.split(":")[0] for c in result.checks}
     assert {"exact", "pyramid-4", "pyramid-4-inscribed", "pyramid-8", "pyramid-16"} <= labels

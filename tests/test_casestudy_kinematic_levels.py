@@ -9,6 +9,7 @@ import pytest
 
 from stiction import cli
 from stiction.casestudies import kinematic_levels as cs
+from stated_checks import assert_checks_as_stated
 
 
 @pytest.fixture(scope="module")
@@ -42,9 +43,24 @@ def fd_terms(model, q, v):
     return A, J @ np.linalg.solve(M, nle) - Jdot_v, Jv
 
 
+# The module's checks as this file states them (docs/casestudies/kinematic-levels.md): pattern,
+# expected, tolerance, kind. Measured (quick run): thresholds 5e-12 relative, sliding rate 1.018,
+# sliding error 2.5e-4, acceleration limits 9e-14, package A, b 3.4e-14.
+STATED = [
+    (r"^eq\. 6[78] \(Psi_p = [01]", 0.0, 0.0, "=="),  # no force below delta*
+    (r"^eq\. 6[78]: delta\*", 1.0, 1e-6, "=="),
+    (r"^eq\. 68-69 sliding \(v_t", 1.0, 0.05, "=="),  # convergence order 1
+    (r"^eq\. 68-69 sliding: \|lambda", 1e-3, 0.0, "<="),
+    (r"^eq\. 69 \((stick|slip),", 1e-8, 0.0, "<="),
+    (r"^eq\. 22, 27:", 1e-9, 0.0, "<="),
+    (r"^solves that did not converge", 0.0, 0.0, "=="),
+]
+
+
 def test_every_check_passes(result):
     failed = [(c.quantity, c.measured, c.expected) for c in result.checks if not c.passed]
     assert not failed
+    assert_checks_as_stated(result, STATED)
     assert len(result.checks) >= 9
 
 

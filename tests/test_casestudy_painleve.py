@@ -10,6 +10,7 @@ import pytest
 import stiction
 from stiction.casestudies import painleve
 from stiction.cli import main
+from stated_checks import assert_checks_as_stated
 
 G = 9.81
 
@@ -27,9 +28,32 @@ def closed_forms(theta, mu, m=painleve.MASS, l=painleve.HALF_LENGTH, theta_dot=p
     return A, Ainv, G - l * theta_dot**2 * s, m / 4 * (1 + 3 * c * c - 3 * mu * s * c), Ainv[:, 0]
 
 
+# The module's checks as this file states them (docs/casestudies/painleve.md): pattern, expected,
+# tolerance, kind. Measured (quick run): A, b, G_B at rounding (<= 7e-16), G_A 5e-13, mu* 2e-16,
+# theta* 4e-7 deg, residuals 7e-16, picked forces <= 1e-9, jam rate 5e-8, jam impulse 7.6e-4.
+STATED = [
+    (r"^simulator Delassus operator vs eq\. 117", 0.0, 1e-12, "=="),
+    (r"^simulator right-hand side b vs eq\. 116", 0.0, 1e-12, "=="),
+    (r"^G_A from the simulator", 0.0, 1e-11, "=="),
+    (r"^G_B from the simulator's A", 0.0, 1e-12, "=="),
+    (r"^smallest mu with G_B < 0", 4.0 / 3.0, 1e-9, "=="),  # eq. 120 minimised: mu = 4/3
+    (r"^theta of the smallest such mu", math.degrees(math.atan(2.0)), 1e-3, "=="),  # at tan theta = 2
+    (r"^every enumerated solution satisfies eq\. 65", 1e-10, 0.0, "<="),
+    (r"^grid points whose number of solutions", 0.0, 0.0, "=="),
+    (r"^solutions whose kind differs", 0.0, 0.0, "=="),
+    (r"^grid points in the (non-unique|no-solution) region", 1.0, 0.0, ">="),
+    (r"^(unique-slip|unique-detach|no-solution|non-unique): the simulator's first force", 0.0, 1e-7, "=="),
+    (r"^no-solution: the rod jams: stick phase", 2 * 1e-5, 0.0, ">="),  # two steps of delta = 1e-5 s
+    (r"^no-solution: slip velocity decay rate", 1.0, 1e-6, "=="),
+    (r"^no-solution: jam impulse", 0.0, 2e-3, "=="),
+    (r"^every rollout converged", 1.0, 0.0, "=="),
+]
+
+
 def test_every_check_passes(result):
     failed = [(c.quantity, c.measured, c.expected, c.tolerance) for c in result.checks if not c.passed]
     assert not failed
+    assert_checks_as_stated(result, STATED)
     assert result.passed and len(result.checks) >= 15
 
 

@@ -2,12 +2,14 @@
 recomputed here (eq. 90 by a plain fixed-step RK4 of this file, the penalty step's inclusion)."""
 import json
 import math
+import re
 
 import numpy as np
 import pytest
 
 from stiction.casestudies import planar_friction as pf
 from stiction.cli import main
+from stated_checks import assert_checks_as_stated
 
 G = 9.81
 
@@ -17,9 +19,41 @@ def result():
     return pf.run(quick=True)
 
 
+# The module's checks as this file states them (docs/casestudies/planar-friction.md): pattern,
+# expected, tolerance, kind. Measured (quick run): eq. 90 <= 3.4e-8 m/s, decay rates 2.5e-7 (rk4),
+# 4.9e-5 (adaptive), normal force <= 1.0e-9, lag ratio 0.9958, accelerations 1.6e-14, penalty 2e-13.
+G, F = 9.81, 0.5 * 9.81  # F = mu m g, m = 1 kg
+
+
+def _normal_force_tolerance(c):
+    """The solver's promise 1e-10 ||b||, b's rows at most g, ||f_e|| / m (0.9 F) and
+    (2 zeta / delta) ||qdot|| <= ||v0|| / delta (v0 = 1 m/s), as a fraction of m g."""
+    delta = float(re.search(r"delta ([\d.e-]+):", c.quantity).group(1))
+    return 1e-10 * (G + 0.9 * F + 1.0 / delta) / G
+
+
+STATED = [
+    (r"largest step change of \|\|qdot\|\|\^2 while moving", 0.0, 0.0, "<="),  # eq. 91
+    (r"max \|\|qdot - qdot_eq90\|\|", 0.0, 1e-7, "=="),
+    (r"exponential rest, fitted decay rate x delta", 1.0, lambda c: 1e-5 if ", rk4," in c.quantity else 1e-3, "=="),
+    (r"normal force / \(m g\) - 1", 0.0, _normal_force_tolerance, "=="),
+    (r"eq\. 91's d\(", 0.0, 0.0, "<="),
+    (r"rest entry vs the exact stop", 1.0, 0.02, "=="),
+    (r"^1\.1 F from rest, .*: acceleration along f_e", 0.1 * F, 1e-8 * 0.1 * F, "=="),  # (1.1 F - F) / m
+    (r"^1\.1 F from rest, .*: velocity across f_e", 0.0, 1e-9, "=="),
+    (r"^0\.9 F from rest, relaxed ODE .* drift after", 0.0, 1e-12, "=="),
+    (r"^penalty \(model C\)", 0.0, 1e-6, "=="),
+    (r"^penalty: log-log slope", -1.0, 1e-6, "=="),
+    (r"^penalty: largest \|\|lambda\|\| / F", 1.0, 0.0, "<="),
+    (r"^penalty: the package's formulation='penalty'", 0.0, 1e-9, "=="),
+    (r"^every rollout converged", 1.0, 0.0, "=="),
+]
+
+
 def test_every_check_passes(result):
     failed = [(c.quantity, c.measured, c.expected, c.tolerance) for c in result.checks if not c.passed]
     assert not failed
+    assert_checks_as_stated(result, STATED)
     assert result.passed and len(result.checks) >= 10
 
 

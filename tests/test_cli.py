@@ -41,10 +41,12 @@ BAD = [
     (["simulate", "cube-slide", "--duration", "nan"], ["--duration", "finite"]),
     (["simulate", "cube-slide", "--duration", "inf"], ["--duration", "finite"]),
     (["simulate", "cube-slide", "--duration", "0.0004"], ["shorter than one step"]),
+    (["simulate", "cube-slide", "--dt", "1"], ["duration 0.5 s is shorter than one step (dt = 1 s)"]),  # the scene's
     (["simulate", "cube-slide", "--mode", "rk5"], ["--mode", "rk5"]),
     (["simulate", "cube-slide", "--mu", "-1"], ["--mu"]),
     (["simulate", "cube-slide", "--zeta", "0"], ["--zeta"]),
     (["simulate", "cube-slide", "--solver", "pgs"], ["--solver", "pgs"]),
+    (["simulate", "cube-incline-slip", "--duration", "0.05"], ["settle_time = 0.1 s", "ends at t = 0.05 s"]),
     (["simulate", "cube-slide", "--mode", "timestep", "--delta", "1e-3"], []),  # accepted, see below
     (["simulate", "cube-slide", "--plot", "out.txt"], ["--plot", ".png"]),
     (["simulate", "cube-slide", "--save", "t.csv"], ["--save", ".npz"]),
@@ -91,7 +93,7 @@ def test_record_into_a_directory_is_refused_before_simulating(capsys, tmp_path, 
 
 def test_unconverged_run_exits_1_and_says_why(capsys):
     """A tolerance no solver can reach: every step is reported unconverged, and the CLI says so."""
-    rc, out, err = run(capsys, "simulate", "cube-incline-slip", "--duration", "0.005", "--tol", "1e-300",
+    rc, out, err = run(capsys, "simulate", "cube-slide", "--duration", "0.005", "--tol", "1e-300",
                        "--solver", "nsgs", "--json")
     assert rc == 1
     summary = json.loads(out)

@@ -127,3 +127,12 @@ def test_bad_input_is_loud(tmp_path):
         dump.dump("cube-slide", 5, tmp_path, only=[9])
     with pytest.raises(ValueError, match="planar"):  # 2-row contacts: no FCLib local counterpart
         dump.dump("planar-box-slide", 5, tmp_path)
+
+
+def test_every_beyond_the_steps_is_refused(tmp_path, capsys):
+    """--every 10 over 5 steps would write nothing and exit 0: refused (exit 2), before simulating."""
+    with pytest.raises(ValueError, match="every = 10 is more than steps = 5"):
+        dump.dump("cube-slide", 5, tmp_path, every=10)
+    assert cli.main(["dump", "cube-slide", "--steps", "5", "--every", "10", "--out", str(tmp_path)]) == 2
+    assert "every = 10 is more than steps = 5" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())

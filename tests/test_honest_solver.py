@@ -153,12 +153,17 @@ def large_b_problem():
 
 
 def test_large_b_costs_what_small_b_costs():
+    """Cost counted in iterations, not seconds: the same problem scaled to ||b|| = 1 takes the same
+    solver iterations (8: Newton 3 + 5 after the warm start), and ProxQP's warm start stays far from
+    its 20000-iteration budget (measured 63 at ||b|| = 1e8, 14 at 1; the absolute 1e-8 tolerance
+    that once cost 15-80 s spent the budget)."""
     p = large_b_problem()
-    t = time.perf_counter()
     r = stiction.solve(p, tol=1e-10)
-    wall = time.perf_counter() - t
     assert r.converged, r.message
-    assert wall < 1.0  # measured ~1 ms; was 15-80 s
+    unit = stiction.solve(ContactProblem(p.A, p.b / np.linalg.norm(p.b), p.constraints), tol=1e-10)
+    assert unit.converged and r.iterations == unit.iterations
+    assert unit.warm_start_iterations <= r.warm_start_iterations <= 10 * unit.warm_start_iterations
+    assert r.warm_start_iterations < 0.05 * stiction.SolverSettings().proxqp_max_iterations
     # ProxQP ran inside the default: its cost is reported, as every stage's
     names = [s.name for s in r.stages]
     assert "proxqp" in names and r.warm_start_iterations > 0 and r.warm_start_seconds > 0
@@ -184,7 +189,9 @@ def test_time_limit_covers_proxqp(limit):
     t = time.perf_counter()
     r = stiction.Solver("default").solve(p, s)
     wall = time.perf_counter() - t
-    assert wall < 3 * limit + 1.0, (wall, [(st.name, st.seconds) for st in r.stages])
+    # Time is the subject: the time limit holds. Without it this solve runs for minutes; the bound
+    # leaves room for a shared 2-core machine's stalls (3x the limit + 2 s), not for ignoring it.
+    assert wall < 3 * limit + 2.0, (wall, [(st.name, st.seconds) for st in r.stages])
     assert not r.converged
     assert r.stages[0].name == "proxqp (warm start)" and r.stages[0].outcome == "time limit reached"
     # warm_start_seconds is ProxQP's time wherever it ran: the warm start, and any ProxQP stage the
@@ -200,7 +207,9 @@ def test_time_limit_on_a_large_problem(solver):
     t = time.perf_counter()
     r = stiction.solve(p, solver=solver, tol=1e-16, max_iter=10 ** 7, time_limit=0.3)
     wall = time.perf_counter() - t
-    assert wall < 3 * 0.3 + 1.0, (solver, wall, [(s.name, s.iterations, s.seconds) for s in r.stages])
+    # Time is the subject: the 0.3 s limit holds for every solver (10^7 iterations on 150 contacts
+    # would take minutes); 3x + 2 s leaves room for a loaded shared machine.
+    assert wall < 3 * 0.3 + 2.0, (solver, wall, [(s.name, s.iterations, s.seconds) for s in r.stages])
     assert not r.converged and r.stages and all(s.seconds >= 0 for s in r.stages)
 
 

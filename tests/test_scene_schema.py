@@ -77,6 +77,15 @@ BAD_SCENES = [
      ["collision.boxes[0].size", "> 0"]),
     ({"urdf": "ball.urdf", "collision": {"max_contacts": 2}}, ["[collision]", "missing required key 'pairs'"]),
     ({"urdf": "ball.urdf", "contacts": {"feet": True}}, ["contacts.feet", "no foot frames"]),
+    # drift and slip are measured after settle_time: it must come before the end
+    (with_(CUBE, duration=1.0, settle_time=1.5), ["settle_time = 1.5", "shorter than duration = 1"]),
+    (with_(CUBE, duration=1.0, settle_time=1.0), ["settle_time = 1", "shorter than duration = 1"]),
+    # planar contacts (rows t1, n) on a body moving in 3-D would slide across the plane without friction
+    (with_(CUBE, contacts={"box_corners": True, "model": "planar"}),
+     ["contacts.model = \"planar\"", "joint = \"planar\""]),
+    (with_(CUBE, walls=[{"normal": [1, 0, 0], "offset": -1.0, "model": "planar"}]),
+     ["walls[0].model = \"planar\"", "joint = \"planar\""]),
+    ({"array": {"layout": "grid", "count": 2}, "contacts": {"model": "planar"}}, ["contacts.model", "planar"]),
 ]
 
 
@@ -199,3 +208,23 @@ def test_docs_scene_keys_page_is_current():
 
     page = Path(__file__).resolve().parents[1] / "docs" / "scene-keys.md"
     assert page.read_text() == reference_markdown() + "\n", "regenerate docs/scene-keys.md (see its header)"
+
+
+UR5 = {"robot": "ur5", "contacts": {"feet": False}}
+
+
+def test_overlapping_objects_are_refused():
+    """Two [[objects]] boxes (cube.urdf: 0.1 m edges, axis-aligned) may touch but not interpenetrate:
+    the same position, or 1 cm of overlap, is refused naming both."""
+    def objects(*placements):
+        return {**UR5, "objects": [{"name": f"box{k}", "xy": xy, "z": z} for k, (xy, z) in enumerate(placements)]}
+
+    for placements, depth in ((([0.6, 0.0], 0.0), ([0.6, 0.0], 0.0)), 0.1), \
+                              ((([0.6, 0.0], 0.0), ([0.69, 0.0], 0.0)), 0.01), \
+                              ((([0.6, 0.0], 0.0), ([0.6, 0.3], 0.0), ([0.6, 0.0], 0.05)), 0.05):
+        with pytest.raises(SceneError, match=rf"objects\[{len(placements) - 1}\] \('box{len(placements) - 1}'\) "
+                                             rf"overlaps objects\[0\] \('box0'\) by {depth:g} m"):
+            build_scene(objects(*placements))
+    # side by side (faces touching) and stacked (the top one's bottom on the lower one's top) are fine
+    scene = build_scene(objects(([0.6, 0.0], 0.0), ([0.7, 0.0], 0.0), ([0.6, 0.0], 0.1)))
+    np.testing.assert_allclose(scene.q0[-7:-4], [0.6, 0.0, 0.15])

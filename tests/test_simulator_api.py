@@ -5,6 +5,8 @@ import math
 import numpy as np
 import pytest
 
+from stiction import _core
+from stiction.scene import build_scene
 from stiction.simulator import OVERRIDES, Simulator
 
 G = 9.81
@@ -90,15 +92,19 @@ def test_duration_shorter_than_a_step_is_refused():
     sim = Simulator("cube-slide")
     with pytest.raises(ValueError, match="shorter than one step"):
         sim.rollout(4e-4)
+    with pytest.raises(ValueError, match="shorter than one step"):  # half a step: it used to run 0 steps
+        sim.rollout(5e-4)
+    assert len(sim.rollout(6e-4).t) == 2  # rounds to one step
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ValueError, match="duration"):
             sim.rollout(bad)
 
 
-def test_state_copy_semantics_and_set_state():
+def test_state_is_read_only_and_set_state_sets_it():
     sim = Simulator("cube-slide")
     q = sim.data.q
-    q[0] = 5.0  # a copy: the simulator does not see it
+    with pytest.raises(ValueError, match="read-only"):  # a copy: a write would be lost, so it raises
+        q[0] = 5.0
     assert sim.data.q[0] == 0.0
     quat = np.array([0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 2.0])  # a non-unit quaternion is normalised
     sim.set_state(q=quat, v=np.zeros(6), t=0.5)
@@ -121,3 +127,119 @@ def test_state_copy_semantics_and_set_state():
 def test_scene_argument_type():
     with pytest.raises(TypeError, match="scene must be"):
         Simulator(42)
+
+
+# ---- the control inputs are views on the simulator's data; everything else read-only
+
+FALLING_CUBE = {"urdf": "cube.urdf", "contacts": {"box_corners": True}, "initial": {"drop": 1.0}}
+
+
+def _pushed_x(sim: Simulator, steps: int) -> float:
+    """Displacement along x of the falling cube (no contact yet) after `steps` steps."""
+    x0 = sim.data.q[0]
+    for _ in range(steps):
+        sim.step()
+    return sim.data.q[0] - x0
+
+
+def test_in_place_write_of_tau_ff_moves_the_body_as_whole_assignment_does():
+    """A constant push F along x on a free-falling cube: time stepping (v += h F/m, then q += h v)
+    gives x_n = h^2 (F/m) n (n + 1) / 2. Writing the force into sim.data.tau_ff in place must
+    give exactly that, bit for bit the motion of assigning the whole array."""
+    force, steps = 3.0, 20
+    u = np.array([force, 0.0, 0.0, 0.0, 0.0, 0.0])
+    in_place, whole, single = (Simulator(build_scene(FALLING_CUBE)) for _ in range(3))
+    in_place.data.tau_ff[:] = u
+    whole.data.tau_ff = u
+    single.data.tau_ff[0] = force  # one entry
+    m, h = in_place.scene.model.inertias[1].mass, in_place.dt
+    expected = h * h * force / m * steps * (steps + 1) / 2
+    got = [_pushed_x(s, steps) for s in (in_place, whole, single)]
+    assert got[0] == pytest.approx(expected, rel=1e-9)
+    assert got[0] == got[1] == got[2]
+    np.testing.assert_array_equal(in_place.data.q, whole.data.q)
+
+
+def test_a_control_view_stays_bound_to_the_simulator():
+    """A view taken once keeps steering: per-step writes through it take effect, reset() writes the
+    scene's control into it, and it keeps the data alive after the Simulator is gone."""
+    sim = Simulator(build_scene(FALLING_CUBE))
+    tau = sim.data.tau_ff
+    assert isinstance(tau.base, _core.SimulatorData) and tau.flags.writeable
+    m, h = sim.scene.model.inertias[1].mass, sim.dt
+    forces = [1.0, -2.0, 4.0]
+    x0 = sim.data.q[0]
+    for f in forces:  # v_k = h / m * (f_1 + ... + f_k), x_n = h * sum v_k
+        tau[0] = f
+        sim.step()
+    expected = h * h / m * sum(np.cumsum(forces))
+    assert sim.data.q[0] - x0 == pytest.approx(expected, rel=1e-9)
+    sim.data.v_target[:] = 1.0
+    sim.reset()
+    assert np.all(tau == 0.0) and np.all(sim.data.v_target == 0.0)  # the scene's control, in the same memory
+    tau[1] = 2.0
+    assert sim.data.tau_ff[1] == 2.0
+    kp = Simulator("cube-slide").data.kp  # the Simulator is collected: the view holds its data
+    kp[:] = 3.0
+    assert np.all(kp == 3.0)
+
+
+def test_simulator_data_cannot_be_replaced():
+    sim = Simulator("cube-slide")
+    with pytest.raises(AttributeError, match="cannot be replaced"):
+        sim.data = _core.SimulatorData(sim.model)
+
+
+def test_control_assignment_is_checked():
+    sim = Simulator("cube-slide")
+    with pytest.raises(ValueError, match=r"SimulatorData\.tau_ff needs 6"):
+        sim.data.tau_ff = np.ones(5)
+    with pytest.raises(ValueError, match="broadcast"):  # numpy's own check of an in-place write
+        sim.data.tau_ff[:] = np.ones(5)
+    with pytest.raises(ValueError, match=r"SimulatorData\.kd has NaN"):
+        sim.data.kd = [0, 0, 0, 0, 0, math.nan]
+    with pytest.raises(TypeError, match=r"SimulatorData\.q_target"):
+        sim.data.q_target = "0 0 0"
+    with pytest.raises(ValueError, match=r"SimulatorData\.tau_ff has NaN"):  # a float64 array (the fast path)
+        sim.data.tau_ff = np.array([0, 0, 0, 0, 0, math.inf])
+    tau = sim.data.tau_ff
+    sim.data.tau_ff = [1, 2, 3, 4, 5, 6]  # a whole assignment writes into the same memory
+    np.testing.assert_array_equal(tau, [1, 2, 3, 4, 5, 6])
+    sim.data.tau_ff = tau[::-1]  # itself, reversed (a strided view of the same memory)
+    np.testing.assert_array_equal(tau, [6, 5, 4, 3, 2, 1])
+    sim.data.tau_ff = np.arange(6, dtype=">f8")  # big-endian: converted
+    np.testing.assert_array_equal(tau, [0, 1, 2, 3, 4, 5])
+    sim.data.tau_ff = np.arange(12.0)[::2]  # strided
+    np.testing.assert_array_equal(tau, [0, 2, 4, 6, 8, 10])
+    assert np.all(sim.data.kp == sim.scene.kp) and np.all(sim.data.q_target == sim.scene.q_target)
+
+
+def test_state_and_outputs_are_read_only():
+    """A write into anything but a control input would be lost: it raises."""
+    sim = Simulator("cube-slide")
+    sim.step()
+    for name in ("q", "v", "J", "A", "b", "drift", "position_error", "gaps", "M", "tau", "nle",
+                 "candidate_lambda", "contact_velocity", "pair_points", "rows"):
+        a = getattr(sim.data, name)
+        assert not a.flags.writeable, name
+        with pytest.raises(ValueError, match="read-only"):
+            a[...] = 0
+    assert sim.data.A.shape == (12, 12) and sim.data.q.shape == (7,) and sim.data.candidate_lambda.shape == (3, 8)
+
+
+def test_solver_of_another_formulation_is_refused():
+    """Only the exact formulation uses `solver` (as stiction.solve says): another is refused, not ignored."""
+    with pytest.raises(ValueError, match="solver='nsgs' picks the exact law's algorithm; the ccp formulation"):
+        Simulator("cube-slide", formulation="ccp", solver="nsgs")
+    assert Simulator("cube-slide", formulation="ccp").settings.solver == "default"
+    assert Simulator("cube-slide", formulation="exact", solver="nsgs").settings.solver == "nsgs"
+
+
+def test_summary_refuses_a_trajectory_that_ends_before_settling():
+    """Drift is measured after settle_time: a run that ends before it has nothing to measure (it used
+    to report 0 drift)."""
+    sim = Simulator("cube-incline-slip")  # settle_time 0.1 s; the cube slides: drift is not 0
+    with pytest.raises(ValueError, match=r"settle_time = 0\.1 s .* ends at t = 0\.05 s"):
+        sim.summary(sim.rollout(0.05))
+    sim.reset()
+    assert sim.summary(sim.rollout(0.2))["base_drift"] > 0.0

@@ -21,6 +21,11 @@ def test_step_timers_add_up_to_the_wall_time():
     # the phases are within the step; the steps within the rollout, and most of it
     assert (t[:, :4].sum(axis=1) <= t[:, 4] * (1 + 1e-9) + 1e-3).all()
     total = t[:, 4].sum() * 1e-6
-    assert 0.5 * wall <= total <= 1.02 * wall, (total, wall)
+    # Time is the subject here: the timers' conversion rate (counter ticks -> us) is checked
+    # against the steady clock. Time spent preempted on a loaded machine lands mostly inside the
+    # steps (they are most of the rollout), so both sides grow together; the lower bound allows
+    # the recording between steps and stalls outside them, the upper one a 5 % rate error (a
+    # wrong rate, e.g. the nominal instead of the measured frequency, is off by far more).
+    assert 0.5 * wall <= total <= 1.05 * wall, (total, wall)
     # a solve's own time (its stages) is no longer than the step's solve phase
     assert sim.data.result.seconds * 1e6 <= t[-1, 2] * 1.02 + 0.5

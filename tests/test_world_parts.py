@@ -254,9 +254,9 @@ import json, resource
 from stiction.scene import load_scene
 from stiction.simulator import Simulator
 sim = Simulator(load_scene("cube-grid-1024"))
-traj = sim.rollout(0.02)
-s = sim.summary(traj)
-print(json.dumps({"mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "ok": s["all_converged"]}))
+traj = sim.rollout(0.02)  # (shorter than the scene's settle_time: no summary)
+print(json.dumps({"mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+                  "ok": bool(traj.converged[1:].all())}))
 """
 
 
@@ -283,9 +283,51 @@ def test_contact_centers_match_pinocchio():
         _core.contact_centers(sim.model, np.zeros((2, 3)))
 
 
+def _crate_slide_is_where_the_arm_stops(sim, traj):
+    """The crate's slide against Pinocchio's kinematics and statics of the arm: the PD target puts
+    the tool sphere's far side 0.1499 m beyond the crate's face (forward kinematics at q_target);
+    at rest the tool touches the face (gap 0 from the crate's placement) and the arm is in static
+    equilibrium, g(q) = kp (q_target - q) - kd v + g(q_target) + J^T F (F the face's force), so it
+    stops short of its target by its compliance: measured slide 0.1468 m, 3.1e-3 m short; the
+    equilibrium holds to 2.4e-4 N m of torques up to 45 N m."""
+    sc, model = sim.scene, sim.scene.model
+    data = model.createData()
+    face = next(i for i, c in enumerate(sc.contacts) if c.name.startswith("tool0"))
+    c, h = sc.contacts[face], sim.model.halfspaces[sc.contacts[face].halfspace]
+    half = h.offset  # the face lies half the crate's size from its centre
+
+    def tool_centre(q):
+        pin.framesForwardKinematics(model, data, q)
+        return data.oMf[c.frame].act(np.asarray(c.offset, float))
+
+    q, q_target = traj.q[-1], traj.q[-1].copy()
+    q_target[:6] = sc.q_target[:6]
+    crate0 = traj.q[0, 6]
+    nominal = tool_centre(q_target)[0] + c.radius + half - crate0
+    slide = q[6] - crate0
+    tool = tool_centre(q)
+    oMface = data.oMf[h.frame]
+    gap = float(np.dot(h.normal, oMface.actInv(tool)) - h.offset - c.radius)
+    assert abs(gap) <= 1e-9  # touching
+    assert slide == pytest.approx(tool[0] + c.radius + half - crate0, abs=5e-4)  # measured 1.1e-4 (crate yaw)
+    assert 0.0 < nominal - slide < 0.01, (nominal, slide)  # short of the target, by the compliance
+    # the arm's statics at rest, the face force on the tool at its contact point
+    F = oMface.rotation @ np.column_stack([h.tangent1, h.tangent2, h.normal]) @ traj.lam[-1, face]
+    point = tool - c.radius * (oMface.rotation @ np.asarray(h.normal))
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    J = pin.getFrameJacobian(model, data, c.frame, pin.LOCAL_WORLD_ALIGNED)
+    J_point = J[:3] - pin.skew(point - data.oMf[c.frame].translation) @ J[3:]
+    g, g_target = pin.computeGeneralizedGravity(model, data, q), pin.computeGeneralizedGravity(model, data, q_target)
+    kp, kd = np.asarray(sc.kp)[:6], np.asarray(sc.kd)[:6]
+    pd = kp * (q_target[:6] - q[:6]) - kd * traj.v[-1, :6]
+    residual = g[:6] - (pd + g_target[:6] + (J_point.T @ F)[:6])
+    assert np.abs(residual).max() <= 1e-2, residual
+
+
 def test_ur5_pushes_a_free_crate():
     """A robot and a free body in one world (two parts coupled by the tool-face contact): the crate
-    slides 10-20 cm along +x, stays on the floor (no corner lifts more than a rocking of 3 mm), the
+    slides 14.7 cm along +x (where the arm's statics stop it), stays on the floor (no corner lifts more than a rocking of 3 mm), the
     face contact pushes (positive normal force) and A couples the face and floor contacts."""
     from stiction.scene import load_scene as load
 
@@ -295,13 +337,13 @@ def test_ur5_pushes_a_free_crate():
     s = sim.summary(traj)
     assert s["all_converged"] and s["max_residual"] <= 1e-10
     crate = traj.q[:, 6:9]  # the crate's position (after the UR5's 6 joints)
-    assert 0.10 <= crate[-1, 0] - crate[0, 0] <= 0.20
+    _crate_slide_is_where_the_arm_stops(sim, traj)
     assert abs(crate[-1, 1] - crate[0, 1]) < 0.01
     assert np.abs(crate[:, 2] - 0.15).max() < 3e-3
     assert np.abs(traj.v[-1, 6:]).max() < 1e-4 and np.abs(traj.v[-1]).max() < 1e-3  # at rest against the arm
     face = [i for i, c in enumerate(sim.scene.contacts) if c.name.startswith("tool0")]
     assert len(face) == 1
-    assert traj.lam[:, face[0], 2].max() > 1.0  # newtons, pushing
+    assert traj.lam[1:, face[0], 2].max() > 1.0  # newtons, pushing (record 0: no step, NaN)
     sim2 = Simulator(load("ur5-push-box"))
     sim2.set_state(q=traj.q[200], v=traj.v[200])
     sim2.step()

@@ -227,7 +227,7 @@ class PointAnchor:
     target: numpy.ndarray
 
 class SimulatorData:
-    """Per-step workspace and state of a SimulatorModel."""
+    """Per-step workspace and state of a SimulatorModel. The control inputs (kp, kd, q_target, v_target, tau_ff) read as writable numpy views on the data (in-place writes reach the next step); q, v and the outputs of the last step as read-only copies."""
     @property
     def A(self) -> numpy.ndarray: ...
 

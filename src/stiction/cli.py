@@ -17,6 +17,7 @@ from pathlib import Path
 
 from . import fclib, formulation_infos, formulation_names, solver_names, solve
 from ._optional import MissingExtraError, require
+from ._validation import positive_int as _positive_int
 
 from .resources import DEMO_FCLIB_PROBLEMS as DEMO_PROBLEMS  # one per family that shows something
 from .resources import fclib_dir
@@ -129,7 +130,7 @@ def cmd_demo(args) -> int:
         print(f"== {scene}: {sim.scene.description}")
         keys = ("steps", "us_per_step", "max_penetration", "max_residual", "base_drift", "max_foot_slip",
                 "max_normal_velocity_while_sliding", "mean_acceleration_along_slope",
-                "expected_sliding_acceleration")
+                "expected_sliding_acceleration", "final_base_speed", "final_base_sway", "settled")
         for k in keys:
             print(f"   {k:36s} {summary[k]:.4g}" if isinstance(summary[k], float) else f"   {k:36s} {summary[k]}")
         print("   µs per phase: " + ", ".join(f"{k} {v:.2f}" for k, v in summary["us_per_phase"].items()))
@@ -294,7 +295,7 @@ def cmd_bench_all(args) -> int:
     from .bench import ALL_RUNS
 
     common = ["--out", args.out] + (["--quick"] if args.quick else [])
-    common += ["--cluster", args.cluster] if args.cluster else []
+    common += ["--cluster", args.cluster] if args.cluster is not None else []  # "" is refused by each bench
     common += ["--workers", str(args.workers)] if args.workers else []
     results = []
     for run in ALL_RUNS:
@@ -371,16 +372,6 @@ def _finite(kind: str):
         return x
 
     return parse
-
-
-def _positive_int(text: str) -> int:
-    try:
-        x = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if x < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: must be >= 1")
-    return x
 
 
 def _version() -> str:

@@ -69,6 +69,8 @@ def dump(scene, steps: int, out_dir: str | os.PathLike, every: int = 1, solver: 
     for name, val in (("steps", steps), ("every", every)):
         if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
             raise ValueError(f"dump: {name} must be an integer >= 1, got {val!r}")
+    if only is None and every > steps:
+        raise ValueError(f"dump: every = {every} is more than steps = {steps}: no step would be written (--every, --steps)")
     if solver is not None:
         if solver not in _core.solver_names():
             raise ValueError(f"dump: solver must be one of {', '.join(_core.solver_names())}, got {solver!r}")

@@ -37,7 +37,7 @@ def plot_trajectory(sim, traj, path: str | os.PathLike) -> None:
 
     ax = axes[2]
     for i, name in enumerate(traj.contact_names):
-        if np.abs(traj.lam[:, i]).max() == 0:
+        if np.abs(traj.lam[1:, i]).max(initial=0.0) == 0:  # (record 0: no step, NaN)
             continue
         line, = ax.plot(t, traj.lam[:, i, 2], label=f"{name} normal")
         ax.plot(t, np.linalg.norm(traj.lam[:, i, :2], axis=-1), "--", color=line.get_color())

@@ -201,7 +201,7 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
     at the contact point and its force: an arrow from the contact point along the force the
     ground exerts (traj.lam in the half-space frame), green while the contact sticks, red
     while it slips, blue while a bilateral contact is closed (state 3; only if it occurs),
-    nothing while it is open. Exactly one arrow (the state's own) is visible per closed
+    nothing while it is open or before the first step (record 0: state -1, no force yet). Exactly one arrow (the state's own) is visible per closed
     contact. The arrow's shaft is `|force| / force_scale` long (metres); the cone at its
     tip has a fixed size and is not part of that length. Arrow position, direction and
     length are keyed per frame and interpolate linearly between frames; visibility is
@@ -280,7 +280,8 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
             frames[k, i] = B
     normals = frames[..., 2]
     points = centers - np.array([c.radius for c in scene.contacts])[None, :, None] * normals
-    forces = np.einsum("kiab,kib->kia", frames, traj.lam[idx, :nc])
+    # (the first record has no step behind it: lam NaN, states -1; drawn as no force)
+    forces = np.einsum("kiab,kib->kia", frames, np.nan_to_num(traj.lam[idx, :nc]))
     states = traj.states[idx, :nc].astype(int)
     ids = list(range(nc))  # the candidate each drawn contact is (node c<id>)
     if traj.lam.shape[1] > nc:  # coal pair slots: the ones closed at some drawn frame
@@ -290,7 +291,7 @@ def record_html(sim, traj, path: str | os.PathLike, fps: int = 50, force_scale: 
             pair_points, pair_frames = _pair_slots(sim, traj, idx)
             pair_points, pair_frames = pair_points[:, used], pair_frames[:, used]
             # the force on the pair's first geometry: lambda acts on the second along the frame
-            pair_forces = -np.einsum("kiab,kib->kia", pair_frames, traj.lam[idx][:, nc + used])
+            pair_forces = -np.einsum("kiab,kib->kia", pair_frames, np.nan_to_num(traj.lam[idx][:, nc + used]))
             points = np.concatenate([points, pair_points], axis=1)
             normals = np.concatenate([normals, -pair_frames[..., 2]], axis=1)
             forces = np.concatenate([forces, pair_forces], axis=1)

@@ -23,12 +23,14 @@ import numpy as np
 import pinocchio as pin
 
 from . import _core
+from ._validation import vector
 from .resources import robots_dir as bundled_robots_dir
 from .resources import scenes_dir
 from .robots import load_robot, load_urdf, robot_package_dirs
 from .scene_schema import SceneError, did_you_mean, validate_scene
 
 GRAVITY = 9.81
+OVERLAP_TOLERANCE = 1e-9  # m: two [[objects]] boxes may touch (a face on a face), not interpenetrate
 
 
 def __getattr__(name: str):
@@ -246,6 +248,8 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             if q0.shape != (model.nq,):
                 raise SceneError(f"initial.q needs nq = {model.nq} entries, got {q0.shape[0]}")
             q0 = _quaternion_check(model, q0, "initial.q")
+        if initial["joints"] is not None:
+            q0 = _named_joint_positions(model, q0, initial["joints"], initial["q"] is not None)
         if control["lock_joints"] and model.njoints > 2:
             # A rigid robot: every joint but the free flyer held at its initial value.
             lock = list(range(2, model.njoints))
@@ -293,14 +297,23 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
     if cfg["objects"]:  # appended in place: to copies (the robot's models stay as loaded)
         model = model.copy()
         visual = visual.copy() if visual is not None else pin.GeometryModel()
+    placed = []  # (index, centre, half extents) of the objects so far
     for k, obj in enumerate(cfg["objects"]):
         model, visual, frame, half = _append_box(model, visual, obj["urdf"], obj["name"], base_dir,
                                                  f"objects[{k}].urdf", cache)
+        centre = np.array([obj["xy"][0], obj["xy"][1], float(half[2]) + obj["z"]])
+        for j, other, other_half in placed:
+            # axis-aligned boxes (q0 holds the identity rotation) overlap when they do along every axis
+            depth = float(np.min(half + other_half - np.abs(centre - other)))
+            if depth > OVERLAP_TOLERANCE:
+                raise SceneError(f"objects[{k}] ({obj['name']!r}) overlaps objects[{j}] "
+                                 f"({cfg['objects'][j]['name']!r}) by {depth:.3g} m: move its xy or z")
+        placed.append((k, centre, half))
         object_frames[obj["name"]] = frame
         obj_mu = mu if obj["mu"] is None else obj["mu"]
         for c, corner in enumerate(_corners(half, z_sign=-1)):
             contacts.append(_sphere(f"{obj['name']}-corner{c}", frame, corner, 0.0, 0, obj_mu, cmodel))
-        q0 = np.concatenate([q0, [obj["xy"][0], obj["xy"][1], float(half[2]) + obj["z"], 0.0, 0.0, 0.0, 1.0]])
+        q0 = np.concatenate([q0, [*centre, 0.0, 0.0, 0.0, 1.0]])
 
     for w, wall in enumerate(cfg["walls"]):
         name = wall["name"] or f"wall{len(halfspaces)}"
@@ -405,6 +418,7 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
     root_nq = 7 if free else 4 if planar else 0
     kp[start:robot_nv] = control["kp"]  # the robot's joints (objects are not actuated)
     kd[start:robot_nv] = control["kd"]
+    _per_joint_gains(model, control["gains"], start, robot_nv, kp, kd)
     q_target = q0.copy()
     if control["q_target"] is not None:
         joints = np.asarray(control["q_target"], dtype=float)
@@ -414,7 +428,13 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
         q_target[root_nq:robot_nq] = joints
     tau_ff = np.zeros(model.nv)
     if control["gravity_feedforward"]:
-        tau_ff = pin.computeGeneralizedGravity(model, model.createData(), q_target).copy()
+        if free:
+            if pairs:
+                raise SceneError("control.gravity_feedforward: a free-flyer robot stands on its sphere/point contacts; "
+                                 "the [collision] pairs' contact points are not known before the step")
+            tau_ff = standing_feedforward(model, q_target, contacts, halfspaces, robot_nv)
+        else:
+            tau_ff = pin.computeGeneralizedGravity(model, model.createData(), q_target).copy()
         tau_ff[:start] = 0.0
         tau_ff[robot_nv:] = 0.0
 
@@ -425,6 +445,116 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
         duration=cfg["duration"], dt=cfg["dt"], settle_time=cfg["settle_time"],
         mode=cfg["mode"], delta=cfg["delta"], zeta=cfg["zeta"],
         slope_deg=slope_deg, mu=mu, config=cfg)
+
+
+def _named_joint_positions(model: pin.Model, q: np.ndarray, joints: dict, explicit_q: bool) -> np.ndarray:
+    """[initial] joints: q with the named 1-dof joints set (over the reference posture)."""
+    if explicit_q:
+        raise SceneError("initial.joints sets joints of the reference posture; initial.q gives every joint "
+                         "itself: give one of them")
+    names = [model.names[j] for j in range(1, model.njoints)]
+    out = q.copy()
+    for name, value in joints.items():
+        if not model.existJointName(name):
+            hint = did_you_mean(name, names)
+            raise SceneError(f"initial.joints: no joint {name!r} in the model ({hint}joints: {', '.join(names)})")
+        joint = model.joints[model.getJointId(name)]
+        if joint.nq != 1:
+            raise SceneError(f"initial.joints: {name!r} has {joint.nq} coordinates; name 1-dof joints (or give "
+                             "initial.q)")
+        out[joint.idx_q] = value
+    return out
+
+
+def _per_joint_gains(model: pin.Model, gains: list, start: int, robot_nv: int, kp: np.ndarray,
+                     kd: np.ndarray) -> None:
+    """[[control.gains]]: kp, kd of the robot's actuated joints whose names match a pattern, in
+    place; every pattern must match a joint."""
+    import fnmatch
+
+    joints = [j for j in range(1, model.njoints) if start <= model.joints[j].idx_v < robot_nv]
+    names = [model.names[j] for j in joints]
+    for k, entry in enumerate(gains):
+        for pattern in entry["joints"]:
+            matched = [j for j, n in zip(joints, names) if fnmatch.fnmatchcase(n, pattern)]
+            if not matched:
+                hint = did_you_mean(pattern, names)
+                raise SceneError(f"control.gains[{k}].joints: {pattern!r} matches no actuated joint ({hint}joints: "
+                                 f"{', '.join(names) or 'none'})")
+            for j in matched:
+                iv, nvj = model.joints[j].idx_v, model.joints[j].nv
+                if entry["kp"] is not None:
+                    kp[iv:iv + nvj] = entry["kp"]
+                if entry["kd"] is not None:
+                    kd[iv:iv + nvj] = entry["kd"]
+
+
+STANDING_CONTACT_TOLERANCE = 1e-6  # m: a contact within this of the lowest one carries weight
+
+
+def standing_feedforward(model: pin.Model, q: np.ndarray, contacts: list, halfspaces: list,
+                         robot_nv: int | None = None) -> np.ndarray:
+    """The joint torques that hold a free-flyer robot still at q on its contacts (nv entries, the
+    base's rows 0): the static equilibrium of the equations of motion M q'' + Φ = J^T lambda
+    (eq. 39) at rest, where Φ(q, 0) = g(q) - S^T tau:
+
+        g(q) = S^T tau + J(q)^T lambda,
+
+    whose 6 base rows g_b = J_b^T lambda (the weight and its moment) fix lambda up to the split
+    among the contacts; the split taken is the least-norm one (a linear spread of the normal
+    forces, no tangential force a flat ground does not need), and tau = g_a - J_a^T lambda.
+
+    The contacts are the robot's spheres and points on a half-space (the ground, a wall, a face
+    of a free object taken where it is) whose gap at q, the robot lowered onto its lowest one, is
+    within STANDING_CONTACT_TOLERANCE of it. A split that needs a pulling contact or a force
+    outside a friction cone is an error (the robot cannot stand there on these contacts)."""
+    nv = model.nv if robot_nv is None else robot_nv
+    data = model.createData()
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    g = pin.computeGeneralizedGravity(model, data, q)
+    data_h = model.createData()  # half-spaces carried by bodies, where they are at q
+    pin.framesForwardKinematics(model, data_h, q)
+    rows, normals, mus, names, gaps = [], [], [], [], []
+    for c in contacts:
+        frame = model.frames[c.frame]
+        if model.joints[frame.parentJoint].idx_v >= nv:
+            continue  # a free object's own contact (its corner on the ground), not the robot's
+        h = halfspaces[c.halfspace]
+        place = data_h.oMf[h.frame] if h.frame else pin.SE3.Identity()
+        normal = place.rotation @ (np.asarray(h.normal) / np.linalg.norm(h.normal))
+        centre = data.oMf[c.frame].act(np.asarray(c.offset, dtype=float))
+        offset = float(h.offset) + float(normal @ place.translation)
+        gaps.append(float(normal @ centre) - offset - c.radius)
+        point = centre - c.radius * normal - data.oMf[c.frame].translation
+        J = pin.getFrameJacobian(model, data, c.frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+        rows.append(J[:3, :nv] - pin.skew(point) @ J[3:, :nv])  # the material point at the contact
+        normals.append(normal)
+        mus.append(c.mu)
+        names.append(c.name)
+    if not rows:
+        raise SceneError("control.gravity_feedforward: the free-flyer robot has no contact to stand on")
+    gaps = np.asarray(gaps)
+    touching = np.flatnonzero(gaps <= gaps.min() + STANDING_CONTACT_TOLERANCE)
+    J = np.vstack([rows[i] for i in touching])  # (3k, nv), world-frame point velocities
+    weight = g[:6]
+    lam, *_ = np.linalg.lstsq(J[:, :6].T, weight, rcond=None)
+    if np.linalg.norm(J[:, :6].T @ lam - weight) > 1e-9 * max(1.0, np.linalg.norm(weight)):
+        raise SceneError(f"control.gravity_feedforward: the contacts touching at q_target "
+                         f"({', '.join(names[i] for i in touching)}) cannot balance the robot's weight and its "
+                         "moment (a line or a point of support)")
+    forces = lam.reshape(-1, 3)
+    for k, i in enumerate(touching):
+        fn = float(forces[k] @ normals[i])
+        ft = float(np.linalg.norm(forces[k] - fn * normals[i]))
+        if fn < -1e-9 * np.linalg.norm(weight) or ft > mus[i] * fn + 1e-9 * np.linalg.norm(weight):
+            raise SceneError(f"control.gravity_feedforward: standing at q_target needs contact {names[i]!r} to "
+                             f"{'pull' if fn < 0 else 'slip'} (normal {fn:.4g} N, tangential {ft:.4g} N, mu "
+                             f"{mus[i]:g}): its weight is not over its support")
+    tau = g[:nv] - J.T @ lam
+    out = np.zeros(model.nv)
+    out[6:nv] = tau[6:]
+    return out
 
 
 def _frame_id(model: pin.Model, name: str, field: str) -> int:
@@ -504,9 +634,7 @@ def scene_from_model(model: pin.Model, visual_model: pin.GeometryModel | None = 
     if q0 is None:
         q = pin.neutral(model)
     else:
-        from .simulator import _vector
-
-        q = _quaternion_check(model, _vector("q0", q0, model.nq), "q0", strict=False)
+        q = _quaternion_check(model, vector("q0", q0, model.nq), "q0", strict=False)
     contacts = []
     for k, spec in enumerate(spheres):
         if isinstance(spec, (str, bytes)) or not hasattr(spec, "__len__") or len(spec) not in (2, 3):
@@ -675,8 +803,6 @@ def _pile_bodies(paths: list[str], count: int, spacing: float | None, seed: int,
     if count > PILE_MAX_BODIES:
         raise SceneError(f"array.count = {count}: a pile holds at most {PILE_MAX_BODIES} bodies (its broad phase "
                          "checks every pair)")
-    if cmodel == "planar":
-        raise SceneError("contacts.model = \"planar\": a pile is three-dimensional (spatial or frictionless)")
     rng = np.random.default_rng(seed)
     model, visual, geometry = pin.Model(), pin.GeometryModel(), pin.GeometryModel()
     cache: dict = {}

@@ -25,7 +25,8 @@ class Key:
     """One key of a table.
 
     kind: "str", "bool", "float", "int", "vector" (a list of numbers; `length` fixes its size),
-    "strings" (a list of strings), "pairs" (a list of [string, string]).
+    "strings" (a list of strings), "pairs" (a list of [string, string]), "named_numbers" (a
+    table of name = number).
     """
 
     name: str
@@ -67,8 +68,8 @@ class Table:
 _VEC3 = dict(kind="vector", length=3)
 
 CONTACT_MODELS = ("spatial", "planar", "frictionless")
-_MODEL_DOC = ("contact model: spatial (3 rows t1, t2, n), planar (2 rows t1, n: planar scenes) or frictionless "
-              "(1 unilateral row n); mu = 0 uses the 1 row automatically")
+_MODEL_DOC = ("contact model: spatial (3 rows t1, t2, n), planar (2 rows t1, n: `joint = \"planar\"` scenes only) or "
+              "frictionless (1 unilateral row n); mu = 0 uses the 1 row automatically")
 
 GROUND = Table("ground", "The ground plane z = 0; a slope tilts gravity (downhill = +x).", (
     Key("slope_deg", "float", "slope angle in degrees (gravity tilted about y)", 0.0, low=-89.0, high=89.0),
@@ -86,13 +87,25 @@ CONTACTS = Table("contacts", "Which points of the robot touch the ground (analyt
     Key("model", "str", _MODEL_DOC, "spatial", choices=CONTACT_MODELS),
 ))
 
+GAINS = Table("gains", "Per-joint gains: each entry sets kp and/or kd of the robot's joints whose names match one "
+              "of its patterns, over the uniform `kp`, `kd` (entries apply in order: a later one wins).", (
+    Key("joints", "strings", "joint names or shell-style patterns (fnmatch: `leg_*`, `arm_*_1_joint`); each must "
+        "match a joint of the robot", required=True, nonempty=True),
+    Key("kp", "float", "joint stiffness in N m/rad of the matched joints (default: unchanged)", low=0.0),
+    Key("kd", "float", "joint damping in N m s/rad of the matched joints (default: unchanged)", low=0.0),
+), array=True)
+
 CONTROL = Table("control", "Joint PD towards the initial posture (or `q_target`), implicit in time stepping.", (
     Key("kp", "float", "joint stiffness in N m/rad", 0.0, low=0.0),
     Key("kd", "float", "joint damping in N m s/rad", 0.0, low=0.0),
     Key("q_target", "vector", "joint positions the PD holds (nq minus the free flyer's 7)"),
-    Key("gravity_feedforward", "bool", "add tau_ff = g(q_target)", False),
+    Key("gravity_feedforward", "bool", "add tau_ff = the joint torques that hold q_target still: g(q_target) for a "
+        "fixed base; for a free-flyer robot, its static equilibrium on its contacts that touch at q_target (the "
+        "sphere/point contacts whose gaps are within 1 µm of the lowest): tau_ff = g(q) - J^T lambda, lambda the "
+        "least-norm split of the weight over them (an error when that split needs a pulling or slipping contact)",
+        False),
     Key("lock_joints", "bool", "hold every joint at its initial value (a rigid robot)", False),
-))
+), tables=(GAINS,))
 
 INITIAL = Table("initial", "The initial state.", (
     Key("q", "vector", "the full configuration (nq entries; quaternions x, y, z, w, non-zero)"),
@@ -102,6 +115,9 @@ INITIAL = Table("initial", "The initial state.", (
     Key("base_xy", "vector", "free-flyer x, y position", length=2),
     Key("drop", "float", "height in m above touching the ground", 0.0, low=0.0),
     Key("top_velocity", "vector", "`bodies` scenes: velocity of the top body (6 entries)", length=6),
+    Key("joints", "named_numbers", "positions of named 1-dof joints over the robot's reference posture, e.g. "
+        "{ leg_left_6_joint = 0.0 } (rad or m; the PD holds them too unless `q_target` is given); a robot "
+        "scene without initial.q"),
 ))
 
 WALLS = Table("walls", "Extra fixed half-spaces {x : normal . x >= offset} and the spheres that touch them.", (
@@ -124,7 +140,8 @@ OBJECTS = Table("objects", "Free boxes added to a `robot` or `urdf` scene, each 
     Key("name", "str", "the box's name (its frames are suffixed with it; `walls.body` refers to it)",
         required=True),
     Key("urdf", "str", "a box URDF (relative: to the scene file's folder, then the bundled robots)", "cube.urdf"),
-    Key("xy", "vector", "centre x, y in the world (the box rests on the ground)", required=True, length=2),
+    Key("xy", "vector", "centre x, y in the world (the box rests on the ground; boxes may touch, not overlap)",
+        required=True, length=2),
     Key("z", "float", "height in m of the box's bottom above the ground (0: it rests on it; above: held by the "
         "robot, e.g. between two pads, or falling)", 0.0, low=0.0),
     Key("mu", "float", "friction coefficient of its corners on the ground (default: [ground] mu)", low=0.0),
@@ -187,7 +204,8 @@ SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `bodies` or `[a
     Key("bodies", "strings", "free-flying URDF boxes stacked in the listed order", nonempty=True),
     Key("duration", "float", "seconds simulated by default", 2.0, low=0.0, low_open=True),
     Key("dt", "float", "time step in s", 1e-3, low=0.0, low_open=True),
-    Key("settle_time", "float", "seconds excluded from the drift and slip measures", 0.0, low=0.0),
+    Key("settle_time", "float", "seconds excluded from the drift and slip measures (shorter than `duration`)", 0.0,
+        low=0.0),
     Key("mode", "str", "integration: time stepping (eq. 70) or the relaxed DAI as an ODE (eq. 64)", "timestep",
         choices=("timestep", "rk4", "ode", "adaptive")),
     Key("delta", "float", "ODE modes: Baumgarte delta in s (0: dt)", 0.0, low=0.0),
@@ -276,6 +294,12 @@ def _check_value(key: Key, value, where: str) -> Any:
         if key.nonempty and not value:
             fail("must not be empty")
         return [list(p) for p in value]
+    if key.kind == "named_numbers":
+        if not isinstance(value, dict) or not all(isinstance(k, str) and _is_number(x) for k, x in value.items()):
+            fail("must be a table of name = number")
+        if not all(math.isfinite(x) for x in value.values()):
+            fail("entries must be finite")
+        return {k: float(x) for k, x in value.items()}
     raise AssertionError(f"schema: unknown kind {key.kind}")
 
 
@@ -340,6 +364,16 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
         names = [o["name"] for o in out["objects"]]
         if len(set(names)) != len(names):
             raise SceneError(f"objects: names must be unique, got {names}")
+        if out["settle_time"] >= out["duration"]:
+            raise SceneError(f"settle_time = {out['settle_time']:g} must be shorter than duration = "
+                             f"{out['duration']:g} (drift and slip are measured after settling)")
+        planar_root = out["joint"] == "planar"
+        for label, model in [("contacts.model", out["contacts"]["model"])] + \
+                [(f"walls[{i}].model", w["model"]) for i, w in enumerate(out["walls"])]:
+            if model == "planar" and not planar_root:
+                raise SceneError(f"{label} = \"planar\": planar contacts (rows t1, n: no friction across the "
+                                 "plane) need a planar scene (joint = \"planar\"); this scene moves in 3-D: use "
+                                 "spatial")
         if out["mode"] == "timestep" and "delta" in cfg:
             raise SceneError("delta applies to the ODE modes (mode = rk4, ode or adaptive) only")
         if "joint" in cfg and "free_flyer" in cfg and (out["joint"] == "free_flyer") != out["free_flyer"]:
@@ -347,6 +381,9 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
                              "give `joint` only")
         if out["joint"] is not None and out["urdf"] is None:
             raise SceneError("joint applies to `urdf` scenes only")
+        for i, g in enumerate(out["control"]["gains"]):
+            if g["kp"] is None and g["kd"] is None:
+                raise SceneError(f"control.gains[{i}]: give kp, kd or both (joints {g['joints']} would keep their gains)")
         for i, a in enumerate(out["anchors"]):
             if a["target"] is not None and a["frame2"] is not None:
                 raise SceneError(f"anchors[{i}]: give `target` or `frame2`, not both")
@@ -373,7 +410,7 @@ def _default_text(key: Key) -> str:
 
 def _type_text(key: Key) -> str:
     base = {"str": "string", "bool": "bool", "float": "number", "int": "integer", "strings": "list of strings",
-            "pairs": "list of [name, name]"}.get(key.kind, "list of numbers")
+            "pairs": "list of [name, name]", "named_numbers": "table of name = number"}.get(key.kind, "list of numbers")
     if key.kind == "vector" and key.length:
         base = f"{key.length} numbers"
     if key.choices:

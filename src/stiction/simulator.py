@@ -12,7 +12,9 @@ import numpy as np
 import pinocchio as pin
 
 from . import _core
-from .scene import Scene, load_scene
+from ._validation import positive as _positive
+from ._validation import vector as _vector
+from .scene import Scene, _quaternion_check, load_scene
 from .formulations import PARAMETERS as FORMULATION_PARAMETERS
 from .formulations import check_name as check_formulation
 from .formulations import settings_for as formulation_settings
@@ -29,6 +31,14 @@ def _rollout(model, data, n_steps: int, every: int = 1) -> dict:
     return {k: (np.asarray(v).reshape(n) if k in _VECTOR_KEYS else np.asarray(v).reshape(n, -1))
             for k, v in rec.items()}
 PHASES = ("kinematics", "delassus", "solve", "integrate", "total")
+NO_STATE = -1  # Trajectory.states of record 0: no solve classified the contacts
+
+
+def _states(recorded: np.ndarray) -> np.ndarray:
+    """The recorded contact states as int8, NaN (record 0: no solve yet) as NO_STATE."""
+    s = np.asarray(recorded)
+    return np.where(np.isnan(s), NO_STATE, s).astype(np.int8)
+
 
 
 @dataclass
@@ -36,12 +46,22 @@ class Trajectory:
     """A recorded rollout. Shapes: N records, nc candidate contacts.
 
     t (N,), q (N, nq), v (N, nv); lam (N, nc, 3) contact forces (t1, t2, n) in N;
-    contact_velocity (N, nc, 3) J v after each step; gaps (N, nc) signed distances;
+    contact_velocity (N, nc, 3) J v after each step; gaps (N, nc) signed distances (of the
+    configuration the step's contact problem was built at: the step's start in time stepping);
     states (N, nc) 0 open / 1 stick / 2 slip / 3 closed; residual (N,) the largest solver
     residual of the step; iterations (N,); converged (N,); dt (N,) the step taken;
     timings (N, 5) µs per phase: kinematics+collision, Delassus, solve, integrate, total;
     rows (N, nc) rows each contact used in the step (3 spatial, 2 planar, 1 frictionless or
     mu = 0, 0 inactive; None in files saved before it was recorded).
+
+    Record 0 is the state the rollout started from, before any step: its gaps are that state's
+    signed distances, its rows the rows each contact would have there, its contact_velocity
+    J v of that state (0 for candidates beyond the activation distance, as in every record);
+    no force acted and no solve classified the contacts, so lam[0] is NaN and states[0] is -1
+    (NO_STATE). residual, iterations, converged, dt and timings of record 0 are those of the
+    step before the rollout, if any (a fresh simulator's: 0, 0, True, 0, 0): read the steps'
+    from record 1 on. Files saved by earlier versions hold zeros in record 0's contact fields
+    (its gaps too).
     """
 
     scene: str
@@ -101,15 +121,6 @@ MAX_RECORD_BYTES = 4e9  # a trajectory larger than this is refused before simula
 MAX_STEPS = 1e9  # steps in one rollout (a C++ int counts them; a typo'd dt must not hang or overflow)
 
 
-def _positive(name: str, value, allow_zero: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise TypeError(f"{name} must be a number, got {type(value).__name__} {value!r}")
-    x = float(value)
-    if not math.isfinite(x) or x < 0 or (x == 0 and not allow_zero):
-        raise ValueError(f"{name} must be a finite number {'>=' if allow_zero else '>'} 0, got {value!r}")
-    return x
-
-
 class _ReadOnly:
     """A read-only view of the C++ settings: they are fixed when the Simulator is built (the
     model is immutable), so assigning to them is an error instead of a silent no-op."""
@@ -141,11 +152,15 @@ class Simulator:
     With another formulation than exact, ``converged`` (per step) is the formulation's own
     stopping test and ``residual`` stays the exact law's, the same yardstick for all.
 
-    State: ``sim.data.q``, ``.v``, ``.t`` and the control vectors (``kp``, ``kd``, ``q_target``,
-    ``v_target``, ``tau_ff``) read as *copies* (numpy arrays detached from the simulator: changing
-    an entry of one changes nothing); assigning a whole array sets it (size and finiteness are
-    checked). The supported way to set the state is :meth:`set_state`, which also normalises
-    quaternions; :meth:`reset` returns to the scene's initial state.
+    Control: ``sim.data.kp``, ``.kd``, ``.q_target``, ``.v_target``, ``.tau_ff`` read as numpy
+    *views* on the simulator's data: ``sim.data.tau_ff[:] = u`` (or ``[i] = x``) takes effect at the
+    next step, as does assigning a whole array (``sim.data.tau_ff = u``: shape, dtype and
+    finiteness checked). State and outputs: ``sim.data.q``, ``.v`` and every array the last step
+    left (``A``, ``b``, ``gaps``, ``candidate_lambda``, ...) read as *read-only copies*: writing
+    into one raises. The supported way to set the state is :meth:`set_state`, which also
+    normalises quaternions; :meth:`reset` returns to the scene's initial state and control (into
+    the same data: views taken before stay valid). ``sim.data`` is the same object for the
+    simulator's life (it cannot be replaced).
     """
 
     def __init__(self, scene: Scene | str | os.PathLike, **overrides):
@@ -167,7 +182,7 @@ class Simulator:
         settings = self._settings_from(sc, overrides)
         self.model = _core.SimulatorModel(sc.model, sc.halfspaces, sc.contacts, sc.anchors, settings,
                                           sc.geometry, sc.pairs)
-        self.data = _core.SimulatorData(self.model)
+        self._data = _core.SimulatorData(self.model)
         self.reset()
 
     @staticmethod
@@ -198,6 +213,9 @@ class Simulator:
             raise ValueError(f"warm_start must be True or False, got {warm!r}")
         s.warm_start = bool(warm)
         formulation = check_formulation(overrides.get("formulation", "exact"))
+        if formulation != "exact" and solver != "default":  # as stiction.solve: nothing would use it
+            raise ValueError(f"solver={solver!r} picks the exact law's algorithm; the {formulation} formulation "
+                             "has its own (drop the solver, or use formulation 'exact')")
         s.formulation = formulation
         fs = formulation_settings(formulation, {k: overrides[k] for k in FORMULATION_PARAMETERS if k in overrides})
         s.formulation_settings = fs
@@ -211,6 +229,18 @@ class Simulator:
             raise ValueError(f"rigid_body_passes must be one of {', '.join(RIGID_BODY_PASSES)}, got {passes!r}")
         s.rigid_body_passes = passes
         return s
+
+    @property
+    def data(self) -> _core.SimulatorData:
+        """The state, control and last step's outputs (one object for the simulator's life, so the
+        control views taken from it stay bound to this simulator)."""
+        return self._data
+
+    @data.setter
+    def data(self, value) -> None:
+        raise AttributeError("Simulator.data cannot be replaced (views of its control arrays would be left "
+                             "pointing at the old one); set the state with set_state(q, v, t), the control "
+                             "through sim.data.tau_ff etc., or reset()")
 
     @property
     def settings(self) -> _ReadOnly:
@@ -231,10 +261,12 @@ class Simulator:
         return names
 
     def reset(self) -> None:
-        """Back to the scene's initial state, time 0 and control."""
+        """Back to the scene's initial state, time 0 and control (v_target 0). Written into the
+        same data: views of the control arrays stay valid and show the scene's values."""
         sc, d = self.scene, self.data
         d.q, d.v, d.t = sc.q0, sc.v0, 0.0
         d.kp, d.kd, d.q_target, d.tau_ff = sc.kp, sc.kd, sc.q_target, sc.tau_ff
+        d.v_target = np.zeros(sc.model.nv)
 
     def set_state(self, q=None, v=None, t: float | None = None) -> None:
         """Set the configuration q (nq), velocity v (nv) and/or time t. Arrays are checked for
@@ -257,7 +289,8 @@ class Simulator:
         """Simulate `duration` seconds (default: the scene's, or the `duration` override) from the
         current state. The loop runs in C++ unless a `callback(simulator)` is given, which then
         runs before every step (e.g. to set data.tau_ff or data.q_target). A duration shorter
-        than one step is refused; otherwise round(duration / dt) steps are taken."""
+        than one step is refused (one that rounds to 0 steps too: 0.5 dt rounds to 0); otherwise
+        round(duration / dt) steps are taken."""
         duration = self.duration if duration is None else _positive("duration", duration)
         if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
             raise ValueError(f"record_every must be an integer >= 1, got {record_every!r}")
@@ -267,7 +300,7 @@ class Simulator:
         if settings.mode == _core.IntegrationMode.adaptive:
             return self._rollout_adaptive(duration, callback)
         steps = duration / settings.dt
-        if steps < 0.5:
+        if round(steps) < 1:  # (not steps < 0.5: Python rounds 0.5 to 0, which ran 0 steps)
             raise ValueError(f"duration {duration:g} s is shorter than one step (dt = {settings.dt:g} s)")
         if steps > MAX_STEPS:
             raise ValueError(f"duration {duration:g} s at dt = {settings.dt:g} s is {steps:.3g} steps, more than "
@@ -308,7 +341,7 @@ class Simulator:
         return Trajectory(
             scene=self.scene.name, contact_names=self.contact_names, t=rec["t"], q=rec["q"], v=rec["v"],
             lam=rec["lam"].reshape(n, nc, 3), contact_velocity=rec["contact_velocity"].reshape(n, nc, 3),
-            gaps=rec["gaps"].reshape(n, nc), states=rec["states"].astype(np.int8).reshape(n, nc),
+            gaps=rec["gaps"].reshape(n, nc), states=_states(rec["states"]).reshape(n, nc),
             residual=rec["residual"], iterations=rec["iterations"].astype(np.int32),
             converged=rec["converged"].astype(bool), dt=rec["dt"], timings=rec["timings"],
             rows=rec["rows"].astype(np.int8).reshape(n, nc))
@@ -332,7 +365,7 @@ class Simulator:
                 raise TypeError(f"batch_rollout: states[{k}] must be a (q, v) pair") from None
             clone = Simulator.__new__(Simulator)
             clone.scene, clone.duration, clone.model = self.scene, self.duration, self.model
-            clone.data = _core.SimulatorData(self.model)
+            clone._data = _core.SimulatorData(self.model)
             clone.data.q, clone.data.v, clone.data.t = self.data.q, self.data.v, self.data.t
             clone.data.kp, clone.data.kd = self.data.kp, self.data.kd
             clone.data.q_target, clone.data.v_target, clone.data.tau_ff = (self.data.q_target, self.data.v_target,
@@ -360,11 +393,15 @@ class Simulator:
         return out
 
     def summary(self, traj: Trajectory) -> dict:
-        """The numbers `stiction simulate --json` prints."""
+        """The numbers `stiction simulate --json` prints. The drift, slip and acceleration measures
+        are taken over the records from the scene's settle_time on: a trajectory that does not go
+        past settle_time is refused (ValueError) rather than reported as 0 drift."""
         sc = self.scene
         after = traj.t >= sc.settle_time - 1e-12
-        if not after.any():
-            after[-1] = True
+        if after.sum() < 2:
+            raise ValueError(f"settle_time = {sc.settle_time:g} s (scene {sc.name!r}): the trajectory ends at t = "
+                             f"{traj.t[-1]:g} s, with no record after settling to measure drift and slip on; "
+                             "simulate longer than settle_time")
         free = sc.model.njoints > 1 and sc.model.joints[1].shortname() == "JointModelFreeFlyer"
         base = traj.q[:, :3] if free else np.zeros((len(traj.t), 3))
         i0 = int(np.argmax(after))
@@ -406,14 +443,19 @@ class Simulator:
                 iq = sc.model.joints[j].idx_q
                 d = np.linalg.norm(traj.q[after][:, iq:iq + 3] - traj.q[i0, iq:iq + 3], axis=1).max()
                 body_drift = max(body_drift, float(d))
+        base_speed, base_sway, settled = _rest_measures(sc.model, traj)
         tim = np.median(traj.timings[1:], axis=0) if len(traj.t) > 1 else np.zeros(5)
+        # steps taken, not records: rollout(record_every=k) records every k-th step, each record
+        # with the step dt that led to it (the adaptive mode records every step)
+        steps = int(np.rint(np.diff(traj.t) / traj.dt[1:]).sum()) if len(traj.t) > 1 else 0
         out = {
             "scene": sc.name,
             "mode": {0: "timestep", 1: "rk4", 2: "adaptive"}[int(self.settings.mode)],
             "formulation": self.settings.formulation,
             "dt": self.settings.dt,
             "duration": float(traj.t[-1] - traj.t[0]),
-            "steps": int(len(traj.t) - 1),
+            "steps": steps,
+            "recorded_steps": int(len(traj.t) - 1),  # the convergence keys count these
             "contacts": len(sc.contacts),
             "max_body_drift": body_drift,
             "us_per_step": float(tim[4]),
@@ -434,28 +476,20 @@ class Simulator:
             "max_foot_displacement": displacement,
             "rows_per_contact": rows_per_contact,
             "contact_rows": contact_rows,
+            "final_base_speed": base_speed,
+            "final_base_sway": base_sway,
+            "settled": settled,
         }
-        out["warnings"] = _warnings(out)
+        # a robot holding a posture whose contacts stick but whose base still moves sways (PD too soft
+        # or a start posture off the settled one); one that slides or falls is not warned about
+        window = traj.t >= traj.t[-1] - SETTLED_WINDOW - 1e-12
+        actuated = bool((self.data.kp != 0).any() or (self.data.kd != 0).any())
+        sticking = bool((traj.states[window] == 1).any() and not (traj.states[window] == 2).any())
+        out["warnings"] = _warnings(out, swaying=out["settled"] is False and actuated and sticking)
         return out
 
 
-def _vector(name: str, x, n: int) -> np.ndarray:
-    if x is None or isinstance(x, (str, bytes)):
-        raise TypeError(f"{name} must be an array of {n} numbers, got {type(x).__name__}")
-    a = np.asarray(x)
-    if a.dtype.kind not in "biuf":
-        raise TypeError(f"{name} must be an array of {n} real numbers, got dtype {a.dtype}")
-    a = a.astype(np.float64).reshape(-1) if a.ndim <= 1 else a
-    if a.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},), got {np.shape(x)}")
-    if not np.isfinite(a).all():
-        raise ValueError(f"{name} has NaN or infinite entries")
-    return a
-
-
 def _normalized_configuration(model, q: np.ndarray) -> np.ndarray:
-    from .scene import _quaternion_check
-
     return _quaternion_check(model, q, "q", strict=False)
 
 
@@ -475,17 +509,62 @@ def _with_friction(scene: Scene, mu: float) -> Scene:
     return dataclasses.replace(scene, contacts=contacts, pairs=pairs, mu=mu)
 
 
+# `settled` (Simulator.summary): every floating base (free flyer or planar root: a robot's base, a
+# free body) moves slower than SETTLED_SPEED at the end and stayed within SETTLED_SWAY of its final
+# position over the final SETTLED_WINDOW of the run (the whole run when shorter).
+SETTLED_SPEED = 1e-3  # m/s
+SETTLED_SWAY = 1e-3  # m
+SETTLED_WINDOW = 0.5  # s
+
+
+def _floating_roots(model: pin.Model) -> list[tuple[int, int, int]]:
+    """(joint, first q index of its position, first v index) of every free-flyer or planar root."""
+    out = []
+    for j in range(1, model.njoints):
+        kind = model.joints[j].shortname()
+        if model.parents[j] == 0 and kind in ("JointModelFreeFlyer", "JointModelPlanar"):
+            out.append((j, model.joints[j].idx_q, model.joints[j].idx_v))
+    return out
+
+
+def _rest_measures(model: pin.Model, traj: Trajectory) -> tuple:
+    """(final_base_speed, final_base_sway, settled): the largest speed of a floating base's origin at
+    the last record, the largest distance of a base's origin from its final position over the final
+    SETTLED_WINDOW, and whether both are below SETTLED_SPEED and SETTLED_SWAY; (None, None, None)
+    without a floating base (a fixed-base robot)."""
+    roots = _floating_roots(model)
+    if not roots:
+        return None, None, None
+    window = traj.t >= traj.t[-1] - SETTLED_WINDOW - 1e-12
+    speed = sway = 0.0
+    for j, iq, iv in roots:
+        if model.joints[j].shortname() == "JointModelFreeFlyer":
+            # v[:3] is the origin's velocity in the base frame: its norm is the world speed
+            position, velocity = traj.q[:, iq:iq + 3], traj.v[-1, iv:iv + 3]
+        else:  # planar: (x, y) in the joint's plane, v = (vx, vy) in the body frame
+            position, velocity = traj.q[:, iq:iq + 2], traj.v[-1, iv:iv + 2]
+        speed = max(speed, float(np.linalg.norm(velocity)))
+        sway = max(sway, float(np.linalg.norm(position[window] - position[-1], axis=1).max()))
+    return speed, sway, bool(speed < SETTLED_SPEED and sway < SETTLED_SWAY)
+
+
 PENETRATION_WARNING = 1e-3  # m
 
 
-def _warnings(summary: dict) -> list[str]:
+def _warnings(summary: dict, swaying: bool = False) -> list[str]:
     """What a reader of the summary should not miss (also printed by `stiction simulate`)."""
     out = []
     if summary["max_penetration"] > PENETRATION_WARNING:
         out.append(f"max penetration {summary['max_penetration']:.3g} m exceeds {PENETRATION_WARNING:g} m: the step "
                    f"dt = {summary['dt']:g} s is too coarse for the impact speeds (contacts are detected once per step)")
+    if swaying:
+        out.append(f"the robot has not settled: its base moves at {summary['final_base_speed']:.3g} m/s at the end "
+                   f"and swayed {summary['final_base_sway']:.3g} m over the final {SETTLED_WINDOW:g} s (settled: "
+                   f"< {SETTLED_SPEED:g} m/s and < {SETTLED_SWAY:g} m) while its contacts stick")
     if not summary["all_converged"]:
-        out.append(f"{summary['unconverged_steps']} of {summary['steps']} steps did not solve the contact problem "
+        of = f"{summary['steps']}" if summary["recorded_steps"] == summary["steps"] else \
+            f"the {summary['recorded_steps']} recorded (of {summary['steps']})"
+        out.append(f"{summary['unconverged_steps']} of {of} steps did not solve the contact problem "
                    f"to the tolerance (first at t = {summary['first_unconverged_t']:.6g} s)")
     return out
 

@@ -199,6 +199,8 @@ def _solve_formulation(problem, solver, settings, guess, formulation, h, positio
         if position_error.shape[0] != problem.num_rows:
             raise ValueError(f"solve: position_error has {position_error.shape[0]} entries, the problem has "
                              f"{problem.num_rows} rows")
+        if not np.isfinite(position_error).all():
+            raise ValueError("solve: position_error has NaN or infinite entries")
     key = (formulation, solver, tuple(sorted((k, v) for k, v in params.items() if v is not None)))
     cache = _cache.formulations
     f = cache.get(key)

@@ -47,6 +47,8 @@ struct FormulationSolver {
       throw std::invalid_argument("Formulation.solve: h (the step) must be a positive finite number");
     if (!psi.is_none()) {
       position_error = toVector(psi, "Formulation.solve: position_error", p.numRows());
+      if (!position_error.allFinite())  // (a NaN gap would pass through the penalty springs unnoticed)
+        throw std::invalid_argument("Formulation.solve: position_error has NaN or infinite entries");
       context.position_error = &position_error;
     }
     setFormulationContext(*impl, context);

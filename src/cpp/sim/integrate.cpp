@@ -102,71 +102,150 @@ void integrateTimeStep(const SimulatorModel& sim, SimulatorData& sd, double h) {
   sd.last_dt = h;
 }
 
+// The classical RK4 tableau and Bogacki-Shampine 3(2) on the configuration's Lie group, as
+// Runge-Kutta-Munthe-Kaas methods (H. Munthe-Kaas, "Runge-Kutta methods on Lie groups", BIT 38
+// (1998) 92-111, and "High order Runge-Kutta methods on manifolds", Appl. Numer. Math. 29 (1999)
+// 115-127; A. Iserles, H. Munthe-Kaas, S. Norsett, A. Zanna, "Lie-group methods", Acta Numerica 9
+// (2000) 215-365, sec. 5). Every stage's configuration is q0 (+) Theta_s, Theta_s = h sum_j a_sj k_j
+// an increment in the Lie algebra from the step's start q0, and a stage's rate is not its velocity
+// V_s but k_s = dexp^-1_{-Theta_s}(V_s): q = q0 exp(Theta) with body velocity V = q^-1 q' gives
+// Theta' = V + 1/2 [Theta, V] + 1/12 [Theta, [Theta, V]] + O(Theta^4) (the Bernoulli series with
+// ad_{-Theta}, B_3 = 0; an order-p method needs the terms up to ad^(p-2), Munthe-Kaas 1999, so RK4
+// all of these and the 3(2) pair the first two).
+// Combining the velocities themselves (as before) is exact only where the group commutes (revolute
+// and prismatic joints): on a free flyer it left an O(h^3) error per step, order 2 overall
+// (observed at dt = 4, 2, 1 ms: RK4 2.0 on a tumbling rod and Solo-12 in the air, 2.1-2.4 on the
+// anchored rod; Bogacki-Shampine 2.0; now 4.0 and 3.0: tests/test_ode_order.py, docs/simulator.md).
+
+namespace {
+
+// v x w on each block [u, v] of se(3) (pinocchio's Motion::cross: linear first), se(2) ((vx, vy,
+// omega): se(3)'s with z-rotation alone) and so(3); 0 elsewhere. out must not alias u or v.
+void lieBracket(const SimulatorModel& sim, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Eigen::VectorXd& out) {
+  using Group = SimulatorModel::LieAlgebraJoint::Group;
+  out.setZero(u.size());
+  for (const SimulatorModel::LieAlgebraJoint& j : sim.non_abelian_joints) {
+    const int i = j.idx_v;
+    switch (j.group) {
+      case Group::kSE3: {
+        const Eigen::Vector3d ul = u.segment<3>(i), ua = u.segment<3>(i + 3);
+        const Eigen::Vector3d vl = v.segment<3>(i), va = v.segment<3>(i + 3);
+        out.segment<3>(i) = ua.cross(vl) + ul.cross(va);
+        out.segment<3>(i + 3) = ua.cross(va);
+        break;
+      }
+      case Group::kSE2:
+        out[i] = u[i + 1] * v[i + 2] - u[i + 2] * v[i + 1];
+        out[i + 1] = u[i + 2] * v[i] - u[i] * v[i + 2];
+        out[i + 2] = 0.0;
+        break;
+      case Group::kSO3:
+        out.segment<3>(i) = u.segment<3>(i).cross(v.segment<3>(i));
+        break;
+    }
+  }
+}
+
+// k = V + 1/2 [Theta, V] + 1/12 [Theta, [Theta, V]] (see above); k = V where the group commutes.
+void configurationRate(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& theta,
+                       const Eigen::VectorXd& velocity, Eigen::VectorXd& k) {
+  k = velocity;
+  if (sim.non_abelian_joints.empty()) return;
+  lieBracket(sim, theta, velocity, sd.ode_bracket);  // [Theta, V]
+  k += 0.5 * sd.ode_bracket;
+  lieBracket(sim, theta, sd.ode_bracket, sd.ode_bracket2);  // [Theta, [Theta, V]]
+  k += (1.0 / 12.0) * sd.ode_bracket2;
+}
+
+}  // namespace
+
 void integrateRK4(const SimulatorModel& sim, SimulatorData& sd) {
   const double h = sim.settings.dt;
   auto& V = sd.stage_v;
   auto& Acc = sd.stage_a;
+  auto& K = sd.stage_k;
   V.resize(4);
   Acc.resize(4);
-  const Eigen::VectorXd q0 = sd.q, v0 = sd.v;
-  static const double c[4] = {0.0, 0.5, 0.5, 1.0};
+  K.resize(4);
+  sd.ode_q0 = sd.q;
+  sd.ode_v0 = sd.v;
+  sd.q_tmp.resize(sim.model.nq);
+  static const double c[4] = {0.0, 0.5, 0.5, 1.0};  // classical RK4: a_s,s-1 = c_s, the rest 0
   for (int s = 0; s < 4; ++s) {
     if (s == 0) {
-      sd.q_tmp = q0;
-      V[0] = v0;
+      sd.ode_theta.setZero(sim.model.nv);
+      sd.q_tmp = sd.ode_q0;
+      V[0] = sd.ode_v0;
     } else {
-      sd.q_tmp = pinocchio::integrate(sim.model, q0, c[s] * h * V[s - 1]);
-      V[s] = v0 + c[s] * h * Acc[s - 1];
+      sd.ode_theta = c[s] * h * K[s - 1];
+      pinocchio::integrate(sim.model, sd.ode_q0, sd.ode_theta, sd.q_tmp);
+      V[s] = sd.ode_v0 + c[s] * h * Acc[s - 1];
     }
     acceleration(sim, sd, sd.q_tmp, V[s], Acc[s]);
+    configurationRate(sim, sd, sd.ode_theta, V[s], K[s]);
   }
   Stopwatch watch;
-  sd.v = v0 + (h / 6.0) * (Acc[0] + 2.0 * Acc[1] + 2.0 * Acc[2] + Acc[3]);
-  sd.q = pinocchio::integrate(sim.model, q0, (h / 6.0) * (V[0] + 2.0 * V[1] + 2.0 * V[2] + V[3]));
+  sd.v = sd.ode_v0 + (h / 6.0) * (Acc[0] + 2.0 * Acc[1] + 2.0 * Acc[2] + Acc[3]);
+  sd.ode_theta = (h / 6.0) * (K[0] + 2.0 * K[1] + 2.0 * K[2] + K[3]);
+  pinocchio::integrate(sim.model, sd.ode_q0, sd.ode_theta, sd.q);
   sd.t += h;
   sd.last_dt = h;
   watch.lap(sd.timings.integrate);
 }
 
-// Bogacki-Shampine 3(2) with error control on (q, v); q-increments are tangent
-// vectors at the step's start, so the error of q is a difference of increments.
-// (The integrator's own work is not timed here: only its right-hand sides are.)
+// Bogacki-Shampine 3(2) with error control on (q, v), Munthe-Kaas's way as RK4 above:
+// configuration increments are Lie-algebra vectors at the step's start, so the error of q is
+// a difference of increments. (The integrator's own work is not timed here: only its
+// right-hand sides are.)
 void integrateAdaptive(const SimulatorModel& sim, SimulatorData& sd) {
   const SimulatorSettings& s = sim.settings;
   double h = sd.next_dt > 0.0 ? std::min(sd.next_dt, s.dt) : s.dt;
   auto& V = sd.stage_v;
   auto& Acc = sd.stage_a;
+  auto& K = sd.stage_k;
   V.resize(4);
   Acc.resize(4);
-  const Eigen::VectorXd q0 = sd.q, v0 = sd.v;
+  K.resize(4);
+  sd.ode_q0 = sd.q;
+  sd.ode_v0 = sd.v;
+  sd.q_tmp.resize(sim.model.nq);
+  sd.ode_q3.resize(sim.model.nq);
+  const Eigen::VectorXd& q0 = sd.ode_q0;
+  const Eigen::VectorXd& v0 = sd.ode_v0;
   for (int attempt = 0;; ++attempt) {
     if (h < s.min_dt)
       throw std::runtime_error("adaptive integration: step size fell below min_dt at t = " + std::to_string(sd.t));
     V[0] = v0;
     acceleration(sim, sd, q0, V[0], Acc[0]);
+    K[0] = V[0];  // (Theta = 0)
     V[1] = v0 + 0.5 * h * Acc[0];
-    sd.q_tmp = pinocchio::integrate(sim.model, q0, 0.5 * h * V[0]);
+    sd.ode_theta = 0.5 * h * K[0];
+    pinocchio::integrate(sim.model, q0, sd.ode_theta, sd.q_tmp);
     acceleration(sim, sd, sd.q_tmp, V[1], Acc[1]);
+    configurationRate(sim, sd, sd.ode_theta, V[1], K[1]);
     V[2] = v0 + 0.75 * h * Acc[1];
-    sd.q_tmp = pinocchio::integrate(sim.model, q0, 0.75 * h * V[1]);
+    sd.ode_theta = 0.75 * h * K[1];
+    pinocchio::integrate(sim.model, q0, sd.ode_theta, sd.q_tmp);
     acceleration(sim, sd, sd.q_tmp, V[2], Acc[2]);
-    const Eigen::VectorXd dq3 = h * ((2.0 / 9.0) * V[0] + (1.0 / 3.0) * V[1] + (4.0 / 9.0) * V[2]);
-    const Eigen::VectorXd v3 = v0 + h * ((2.0 / 9.0) * Acc[0] + (1.0 / 3.0) * Acc[1] + (4.0 / 9.0) * Acc[2]);
-    const Eigen::VectorXd q3 = pinocchio::integrate(sim.model, q0, dq3);
-    V[3] = v3;
-    acceleration(sim, sd, q3, V[3], Acc[3]);
-    const Eigen::VectorXd dq2 =
-        h * ((7.0 / 24.0) * V[0] + 0.25 * V[1] + (1.0 / 3.0) * V[2] + 0.125 * V[3]);
-    const Eigen::VectorXd v2 =
-        v0 + h * ((7.0 / 24.0) * Acc[0] + 0.25 * Acc[1] + (1.0 / 3.0) * Acc[2] + 0.125 * Acc[3]);
+    configurationRate(sim, sd, sd.ode_theta, V[2], K[2]);
+    sd.ode_theta3 = h * ((2.0 / 9.0) * K[0] + (1.0 / 3.0) * K[1] + (4.0 / 9.0) * K[2]);
+    sd.ode_v3 = v0 + h * ((2.0 / 9.0) * Acc[0] + (1.0 / 3.0) * Acc[1] + (4.0 / 9.0) * Acc[2]);
+    pinocchio::integrate(sim.model, q0, sd.ode_theta3, sd.ode_q3);
+    V[3] = sd.ode_v3;
+    acceleration(sim, sd, sd.ode_q3, V[3], Acc[3]);
+    configurationRate(sim, sd, sd.ode_theta3, V[3], K[3]);
+    sd.ode_theta2 = h * ((7.0 / 24.0) * K[0] + 0.25 * K[1] + (1.0 / 3.0) * K[2] + 0.125 * K[3]);
+    sd.ode_v2 = v0 + h * ((7.0 / 24.0) * Acc[0] + 0.25 * Acc[1] + (1.0 / 3.0) * Acc[2] + 0.125 * Acc[3]);
     // error per unit of the state, mixed absolute/relative
-    const double eq = ((dq3 - dq2).array() / (s.ode_tolerance * (1.0 + dq3.array().abs()))).abs().maxCoeff();
-    const double ev = ((v3 - v2).array() / (s.ode_tolerance * (1.0 + v3.array().abs()))).abs().maxCoeff();
+    const double eq = ((sd.ode_theta3 - sd.ode_theta2).array() /
+                       (s.ode_tolerance * (1.0 + sd.ode_theta3.array().abs()))).abs().maxCoeff();
+    const double ev =
+        ((sd.ode_v3 - sd.ode_v2).array() / (s.ode_tolerance * (1.0 + sd.ode_v3.array().abs()))).abs().maxCoeff();
     const double err = std::max(eq, ev);
     const double factor = err > 0.0 ? std::clamp(0.9 * std::pow(err, -1.0 / 3.0), 0.2, 5.0) : 5.0;
     if (err <= 1.0 && std::isfinite(err)) {
-      sd.q = q3;
-      sd.v = v3;
+      sd.q = sd.ode_q3;
+      sd.v = sd.ode_v3;
       sd.t += h;
       sd.last_dt = h;
       sd.next_dt = std::min(s.dt, h * factor);

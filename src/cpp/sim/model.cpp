@@ -70,6 +70,26 @@ void checkJointAxes(const pinocchio::Model& world) {
   }
 }
 
+// The joints among `joint` (a composite: its sub-joints) whose Lie group does not commute, as
+// pinocchio::integrate treats them: q (+) v = q exp(v) on SE(3), SE(2) and SO(3). Every other
+// kind integrates on R^n or SO(2) (revolute, prismatic, unbounded revolute, spherical ZYX,
+// translation, ...), whose bracket is zero.
+void collectNonAbelian(const pinocchio::JointModel& joint, std::vector<SimulatorModel::LieAlgebraJoint>& out) {
+  using Group = SimulatorModel::LieAlgebraJoint::Group;
+  const std::string kind = joint.shortname();
+  const int iv = joint.idx_v();
+  if (kind == "JointModelFreeFlyer") {
+    out.push_back({Group::kSE3, iv});
+  } else if (kind == "JointModelPlanar") {
+    out.push_back({Group::kSE2, iv});
+  } else if (kind == "JointModelSpherical") {
+    out.push_back({Group::kSO3, iv});
+  } else if (kind == "JointModelComposite") {
+    for (const pinocchio::JointModelVariant& sub : boost::get<pinocchio::JointModelComposite>(joint.toVariant()).joints)
+      collectNonAbelian(pinocchio::JointModel(sub), out);
+  }
+}
+
 // The world's subtrees (children of the universe) as separate models: joints copied in
 // order (a parent before its children), with their placements, inertias and armature. With
 // `fused`, robots get treeOf's description and single free flyers the free-body path; else
@@ -199,6 +219,7 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
     if (kind == "JointModelFreeFlyer") free_flyers.push_back(j);
     if (kind == "JointModelFreeFlyer" || kind == "JointModelSpherical")
       quaternions.emplace_back(j, model.idx_qs[j] + (kind == "JointModelFreeFlyer" ? 3 : 0));
+    collectNonAbelian(model.joints[j], non_abelian_joints);
   }
   if (fused) tree = treeOf(model);  // (else empty: Pinocchio's integrate and difference)
   splitIntoSystems(model, fused, systems, joint_system, joint_local);

@@ -91,21 +91,31 @@ bool Recording::fits(const SimulatorModel& sim, int n_steps, int every) const {
          anchor_lam.cols() == 3 * static_cast<Eigen::Index>(sim.anchors.size());
 }
 
-void Recording::record(const SimulatorModel& sim, const SimulatorData& d) {
+void Recording::record(const SimulatorModel& sim, const SimulatorData& d, bool initial) {
   const int r = records++;
   const int nc = sim.numCandidates();
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   t[r] = d.t;
   q.row(r) = d.q.transpose();
   v.row(r) = d.v.transpose();
   for (int i = 0; i < nc; ++i) {
-    lam.block<1, 3>(r, 3 * i) = d.candidate_lambda.col(i).transpose();
     contact_velocity.block<1, 3>(r, 3 * i) = d.candidate_velocity.col(i).transpose();
-    states(r, i) = static_cast<int>(d.candidate_states[i]);
     rows(r, i) = d.candidate_rows[i];
+    if (initial) {  // no step led here: no force, no state of a solve
+      lam.block<1, 3>(r, 3 * i).setConstant(kNaN);
+      states(r, i) = kNaN;
+    } else {
+      lam.block<1, 3>(r, 3 * i) = d.candidate_lambda.col(i).transpose();
+      states(r, i) = static_cast<int>(d.candidate_states[i]);
+    }
   }
   gaps.row(r) = d.gaps.transpose();
-  for (std::size_t a = 0; a < sim.anchors.size(); ++a)
-    anchor_lam.block<1, 3>(r, 3 * a) = d.anchor_lambda.col(a).transpose();
+  for (std::size_t a = 0; a < sim.anchors.size(); ++a) {
+    if (initial)
+      anchor_lam.block<1, 3>(r, 3 * a).setConstant(kNaN);
+    else
+      anchor_lam.block<1, 3>(r, 3 * a) = d.anchor_lambda.col(a).transpose();
+  }
   residual[r] = d.max_residual_step;
   iterations[r] = d.iterations_step;
   converged[r] = d.all_converged_step ? 1.0 : 0.0;
@@ -121,8 +131,11 @@ void checkCounts(int n_steps, int every) {
   if (every < 1) throw std::invalid_argument("rollout: record_every must be >= 1");
 }
 
+// The first record is the state the rollout starts from, with its own contacts (gaps, rows,
+// J v: contactsAtState), not those of the step that led to it (or of none: zeros).
 void run(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out) {
-  out.record(sim, d);
+  contactsAtState(sim, d);
+  out.record(sim, d, /*initial=*/true);
   for (int k = 1; k <= n_steps; ++k) {
     step(sim, d);
     if (k % every == 0) out.record(sim, d);

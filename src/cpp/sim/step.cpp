@@ -4,6 +4,8 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "stages.hpp"
 
@@ -95,6 +97,17 @@ void checkBlowUp(const SimulatorModel& sim, const SimulatorData& sd) {
   }
 }
 
+// candidate_velocity from row_velocity (rows t1, t2, n per active candidate; 0 for the others).
+void scatterRowVelocities(SimulatorData& sd) {
+  sd.candidate_velocity.setZero();
+  if (sd.rows == 0) return;
+  Eigen::Index row = 0;
+  for (int i : sd.active) {
+    sd.candidate_velocity.col(i) = toSlots(sd.row_velocity.data() + row, sd.candidate_rows[i]);
+    row += sd.candidate_rows[i];
+  }
+}
+
 // The new state finite and not blown up; then the post-step contact velocities J v
 // (rows t1, t2, n) per active candidate, with the last Jacobian (time stepping:
 // exactly the velocity the solve imposed).
@@ -103,15 +116,9 @@ void endStep(const SimulatorModel& sim, SimulatorData& sd, bool first) {
   if (first)
     for (int i : sd.active) sd.reference_penetration = std::max(sd.reference_penetration, -sd.gaps[i]);
   checkBlowUp(sim, sd);
-  sd.candidate_velocity.setZero();
-  if (sd.rows > 0) {
-    if (sim.settings.mode != IntegrationMode::kTimeStepping) multiplyJacobian(sim, sd, sd.v, sd.row_velocity);
-    Eigen::Index row = 0;
-    for (int i : sd.active) {
-      sd.candidate_velocity.col(i) = toSlots(sd.row_velocity.data() + row, sd.candidate_rows[i]);
-      row += sd.candidate_rows[i];
-    }
-  }
+  if (sd.rows > 0 && sim.settings.mode != IntegrationMode::kTimeStepping)
+    multiplyJacobian(sim, sd, sd.v, sd.row_velocity);
+  scatterRowVelocities(sd);
 }
 
 }  // namespace
@@ -127,6 +134,29 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
   delassusOperator(sim, sd);
   rightHandSide(sim, sd, v, delta, zeta);
   watch.lap(sd.timings.delassus);
+}
+
+void contactsAtState(const SimulatorModel& sim, SimulatorData& sd) {
+  if (sd.q.size() != sim.model.nq || sd.v.size() != sim.model.nv)
+    throw std::invalid_argument("state size: q needs nq = " + std::to_string(sim.model.nq) +
+                                " entries and v nv = " + std::to_string(sim.model.nv));
+  // coal warm-starts each pair's GJK from its last answer: keep the step's own history
+  std::vector<std::pair<coal::Vec3s, coal::support_func_guess_t>> guesses;
+  guesses.reserve(sim.pairs.size());
+  for (const GeometryPairContact& g : sim.pairs) {
+    const coal::CollisionRequest& req = sd.geometry_data.collisionRequests[g.pair];
+    guesses.emplace_back(req.cached_gjk_guess, req.cached_support_func_guess);
+  }
+  forwardKinematics(sim, sd, sd.q, sd.v);
+  detectContacts(sim, sd);
+  contactJacobians(sim, sd, sd.v);
+  for (std::size_t p = 0; p < sim.pairs.size(); ++p) {
+    coal::CollisionRequest& req = sd.geometry_data.collisionRequests[sim.pairs[p].pair];
+    req.cached_gjk_guess = guesses[p].first;
+    req.cached_support_func_guess = guesses[p].second;
+  }
+  if (sd.rows > 0) multiplyJacobian(sim, sd, sd.v, sd.row_velocity);
+  scatterRowVelocities(sd);
 }
 
 void step(const SimulatorModel& sim, SimulatorData& sd) {

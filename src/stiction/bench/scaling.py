@@ -96,11 +96,15 @@ FIELDS = ("scene", "layout", "contacts", "steps", "us_per_step", "us_per_contact
 KEY_FIELDS = ("layout", "contacts", "steps")
 DEFAULT_WORKERS = 1  # a timing and a peak-memory figure per size: one size at a time on the machine
 WARMUP_STEPS = 20
+DEFAULT_STEPS, QUICK_STEPS = 200, 50
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--sizes", type=int, nargs="+", metavar="N", help="contact counts (multiples of 4)")
-    parser.add_argument("--steps", type=int, default=200, help="timed steps per size (default 200; --quick 50)")
+    from ..cli import _positive_int  # the CLI's own integer check (called when the CLI builds its parser)
+
+    parser.add_argument("--steps", type=_positive_int, default=None,
+                        help=f"timed steps per size, >= 1 (default {DEFAULT_STEPS}; --quick {QUICK_STEPS})")
     parser.add_argument("--layout", choices=list(LAYOUTS), default="grid",
                         help="cubes side by side on the ground (default) or stacked")
     parser.add_argument("--plot", metavar="FILE.png", help="the log-log chart (also written to --out)")
@@ -108,7 +112,8 @@ def add_arguments(parser) -> None:
 
 def cases(args) -> list[dict]:
     sizes = args.sizes or ([4, 16, 64] if args.quick else [4, 16, 64, 128, 256])
-    steps = 50 if args.quick else args.steps
+    given = getattr(args, "steps", None)  # an explicit --steps is honoured, --quick or not
+    steps = given if given is not None else (QUICK_STEPS if getattr(args, "quick", False) else DEFAULT_STEPS)
     if args.layout not in LAYOUTS:
         raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {args.layout!r}")
     if steps < 1:

@@ -138,7 +138,7 @@ def add_arguments(parser) -> None:
 def _split(text, known, what):
     items = [s.strip() for s in str(text).split(",") if s.strip()]
     if not items:
-        raise ValueError(f"--{what}: empty list")
+        raise ValueError(f"--{what}: empty list (name at least one of {', '.join(known)})")
     for s in items:
         if s not in known:
             raise ValueError(f"--{what}: unknown {what[:-1]} {s!r} (known: {', '.join(known)})")
@@ -148,9 +148,11 @@ def _split(text, known, what):
 def cases(args) -> list[dict]:
     """Every (map, method, x, y); deterministic (no randomness: the scenes are fixed)."""
     quick = bool(getattr(args, "quick", False))
-    maps = _split(getattr(args, "maps", None) or ",".join(MAPS), MAPS, "maps")
-    methods_arg = getattr(args, "methods", None)
-    methods = _split(methods_arg, METHODS, "methods") if methods_arg else list(QUICK_METHODS if quick else METHODS)
+    maps_arg, methods_arg = getattr(args, "maps", None), getattr(args, "methods", None)
+    # an option given empty is an error naming it, never the default
+    maps = _split(maps_arg, MAPS, "maps") if maps_arg is not None else list(MAPS)
+    methods = _split(methods_arg, METHODS, "methods") if methods_arg is not None else \
+        list(QUICK_METHODS if quick else METHODS)
     grids = QUICK_GRIDS if quick else GRIDS
     out = []
     for m in maps:
@@ -351,6 +353,30 @@ def _rotations(quat: np.ndarray) -> np.ndarray:
         np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], 1)
 
 
+def energy_gain(energy) -> float:
+    """The largest rise of the total energy (kinetic + potential) over its initial value, relative
+    to ``abs(E0)`` (absolute when E0 = 0): the energy-gain mode fires above ENERGY_GAIN_LIMIT."""
+    energy = np.asarray(energy, dtype=float)
+    e0 = energy[0]
+    return float((energy.max() - e0) / abs(e0)) if e0 != 0 else float(energy.max() - e0)
+
+
+def drift_limit(duration: float) -> float:
+    """The stiction-violated threshold over a run of `duration` s: DRIFT_RATE_LIMIT (10 µm per 2 s)."""
+    return DRIFT_RATE_LIMIT * duration
+
+
+def direction_error_deg(displacement, expected) -> float:
+    """Angle (degrees) between a body's horizontal displacement (x, y; z dropped) and the
+    direction it should slide; 180 when it did not move horizontally."""
+    horiz = np.array([displacement[0], displacement[1], 0.0], dtype=float)
+    nrm = np.linalg.norm(horiz)
+    if not nrm > 0:
+        return 180.0
+    unit = np.asarray(expected, dtype=float) / np.linalg.norm(expected)
+    return float(np.degrees(np.arccos(np.clip(horiz @ unit / nrm, -1.0, 1.0))))
+
+
 def measures(scene, traj, checks: dict, duration: float) -> dict:
     """Every measured quantity the failure modes need, from a finished trajectory."""
     gravity = np.array(scene.model.gravity.linear)
@@ -370,8 +396,7 @@ def measures(scene, traj, checks: dict, duration: float) -> dict:
         pos.append(com)
         vel.append(np.einsum("nij,nj->ni", R, v_com_local))  # world-frame velocity of the centre of mass
         rot.append(R)
-    e0 = energy[0]
-    out: dict[str, Any] = {"energy_gain": float((energy.max() - e0) / abs(e0)) if e0 != 0 else float(energy.max() - e0)}
+    out: dict[str, Any] = {"energy_gain": energy_gain(energy)}
     # tilt: the largest rotation of any body away from its initial orientation
     tilt = 0.0
     for R in rot:
@@ -399,7 +424,7 @@ def measures(scene, traj, checks: dict, duration: float) -> dict:
         rel = (pos[b] - pos[a])[:, :2]
         drift = float(np.linalg.norm(rel - rel[0], axis=1).max())
     out["drift"] = drift
-    out["drift_limit"] = DRIFT_RATE_LIMIT * duration if drift is not None else None
+    out["drift_limit"] = drift_limit(duration) if drift is not None else None
     # sliding: acceleration (least squares over the sliding interval) and direction of the motion
     accel_err: float | None = None
     direction: float | None = None
@@ -423,13 +448,8 @@ def measures(scene, traj, checks: dict, duration: float) -> dict:
             else:
                 a_meas = (v[idx[-1]] - v[idx[0]]) / max(t[idx[-1]] - t[idx[0]], 1e-300)
             errs.append(float(np.linalg.norm(a_meas - a_exp) / np.linalg.norm(a_exp)))
-            motion = pos[b][-1] - pos[b][0]
             along = np.sign(a_exp[0]) if s["v0"] == 0 else -np.sign(a_exp[0])  # the direction it should move
-            dvec = np.array([along, 0.0, 0.0])
-            horiz = motion.copy()
-            horiz[2] = 0.0
-            nrm = np.linalg.norm(horiz)
-            dirs.append(float(np.degrees(np.arccos(np.clip(horiz @ dvec / nrm, -1, 1)))) if nrm > 0 else 180.0)
+            dirs.append(direction_error_deg(pos[b][-1] - pos[b][0], np.array([along, 0.0, 0.0])))
         accel_err, direction = max(errs), max(dirs)
     out["accel_error"], out["direction_error_deg"] = accel_err, direction
     return out

@@ -39,20 +39,19 @@ from types import ModuleType
 from typing import Any, Callable, Iterable, Iterator
 
 from .._optional import require
+from .._validation import positive_int
 
 COMMON_OPTIONS = ("json", "out", "quick", "cluster", "workers")
 
 
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
-    from ..cli import _positive_int  # the CLI's own integer check (called when the CLI builds its parser)
-
     parser.add_argument("--json", action="store_true", help='print {"command", "stamp", "rows", ...} as JSON')
     parser.add_argument("--out", metavar="DIR", help="write DIR/NAME.csv (resumable: cases already there are "
                         "skipped), DIR/NAME.json and the PNG charts")
     parser.add_argument("--quick", action="store_true", help="a small version (two points per sweep)")
     parser.add_argument("--cluster", metavar="ADDRESS", help="run the cases on a Dask distributed cluster: its "
                         "scheduler address, or 'local' for a LocalCluster on this machine (extra: cluster)")
-    parser.add_argument("--workers", type=_positive_int, metavar="N",
+    parser.add_argument("--workers", type=positive_int, metavar="N",
                         help="local worker processes (default: the bench's; one per core for most)")
 
 
@@ -167,6 +166,32 @@ def case_key(case: dict, key_fields: Iterable[str]) -> tuple[str, ...]:
     return tuple(_cell(case[k]) for k in key_fields)
 
 
+def drop_partial_last_line(path: Path) -> bool:
+    """Cut a CSV back to its last complete line when a run was interrupted mid-write (the file does
+    not end in a newline): the next row must start on a line of its own, never be glued onto the
+    fragment, and the fragment's case runs again. True when something was dropped."""
+    with open(path, "rb+") as fh:
+        size = fh.seek(0, os.SEEK_END)
+        if size == 0:
+            return False
+        fh.seek(size - 1)
+        if fh.read(1) == b"\n":
+            return False
+        # the last newline before the end (rows are short: read back in blocks until one is found)
+        end, keep = size, 0
+        while end > 0:
+            start = max(0, end - 65536)
+            fh.seek(start)
+            block = fh.read(end - start)
+            at = block.rfind(b"\n")
+            if at >= 0:
+                keep = start + at + 1
+                break
+            end = start
+        fh.truncate(keep)
+    return True
+
+
 def read_csv(path: Path, fields: tuple[str, ...]) -> list[dict]:
     with open(path, newline="") as fh:
         reader = csv.reader(fh)
@@ -244,6 +269,55 @@ def evaluate_cases(evaluate: Callable[[dict], dict], cases: list[dict], workers:
                 yield futures[fut], fut.result()
 
 
+CLUSTER_CONNECT_TIMEOUT = 10.0  # s: a Dask scheduler must answer --cluster ADDRESS within this
+
+
+def check_scheduler(address: str, timeout: float | None = None) -> None:
+    """Raise ValueError naming `address` unless a Dask scheduler answers there within `timeout` s
+    (default CLUSTER_CONNECT_TIMEOUT): a malformed address, nothing listening, a port that accepts
+    and stays silent (distributed's Client would wait for ever) or one that speaks another protocol
+    (its bytes read as Dask frame lengths: a request for exabytes) is bad input, not a hang."""
+    import asyncio
+    import concurrent.futures
+
+    from distributed.comm import connect
+    from distributed.core import send_recv
+
+    timeout = CLUSTER_CONNECT_TIMEOUT if timeout is None else float(timeout)
+
+    async def identity():
+        comm = await connect(address, timeout=timeout)
+        try:
+            return await send_recv(comm, op="identity")
+        finally:
+            comm.abort()
+
+    def probe():  # a fresh event loop in its own thread: safe when the caller runs one (Jupyter)
+        return asyncio.run(asyncio.wait_for(identity(), timeout))
+
+    what = f"--cluster {address!r}"
+    pool = concurrent.futures.ThreadPoolExecutor(max_workers=1)
+    try:
+        try:  # the thread's own deadline is `timeout`; the second is a backstop (a stuck name lookup)
+            reply = pool.submit(probe).result(timeout=timeout + 5.0)
+        except (asyncio.TimeoutError, concurrent.futures.TimeoutError, TimeoutError):
+            raise ValueError(f"{what}: no Dask scheduler answered within {timeout:g} s (something listens there, "
+                             "or the address is unreachable; give the scheduler's address, e.g. "
+                             "tcp://HOST:8786, or 'local')") from None
+        except MemoryError:  # another protocol's bytes read as a Dask frame length
+            raise ValueError(f"{what}: something answered there, but not in Dask's protocol (not a Dask "
+                             "scheduler); give the scheduler's address, e.g. tcp://HOST:8786, or 'local'") from None
+        except Exception as exc:  # noqa: BLE001 - refused, unparsable, or not Dask's protocol
+            raise ValueError(f"{what}: not a reachable Dask scheduler ({type(exc).__name__}: "
+                             f"{' '.join(str(exc).split())[:200]}); give the scheduler's address, e.g. "
+                             "tcp://HOST:8786, or 'local'") from None
+    finally:
+        pool.shutdown(wait=False)
+    kind = reply.get("type") if isinstance(reply, dict) else None
+    if kind != "Scheduler":
+        raise ValueError(f"{what}: answered, but as {kind or type(reply).__name__}, not a Dask scheduler")
+
+
 def _evaluate_dask(evaluate, cases, workers, cluster):
     require("distributed", "cluster", "--cluster")
     from distributed import Client, LocalCluster
@@ -255,7 +329,8 @@ def _evaluate_dask(evaluate, cases, workers, cluster):
                              dashboard_address=None)
         client = Client(local)
     else:
-        client = Client(cluster)
+        check_scheduler(cluster)  # Client() alone hangs on a silent port and trusts any bytes it reads
+        client = Client(cluster, timeout=CLUSTER_CONNECT_TIMEOUT)
     try:
         futures = client.map(evaluate, cases, pure=False)
         index = {f.key: case for f, case in zip(futures, cases)}
@@ -287,6 +362,12 @@ def run(module: ModuleType, args: argparse.Namespace, command: str) -> dict:
     keys = [case_key(c, module.KEY_FIELDS) for c in cases]
     if len(set(keys)) != len(keys):
         raise RuntimeError(f"{module.NAME}: two cases share the key fields {module.KEY_FIELDS}")
+    cluster = getattr(args, "cluster", None)
+    if cluster is not None and not cluster.strip():
+        raise ValueError("--cluster: empty address (give a Dask scheduler's address, or 'local')")
+    if cluster and cluster != "local":  # before any file is touched
+        require("distributed", "cluster", "--cluster")
+        check_scheduler(cluster)
     done: dict[tuple, dict] = {}
     out = Path(args.out) if getattr(args, "out", None) else None
     appender = None
@@ -295,6 +376,9 @@ def run(module: ModuleType, args: argparse.Namespace, command: str) -> dict:
             raise ValueError(f"--out {out}: not a folder")
         out.mkdir(parents=True, exist_ok=True)
         csv_path = out / f"{module.NAME}.csv"
+        if csv_path.exists() and drop_partial_last_line(csv_path):
+            print(f"{module.NAME}: {csv_path}: dropped a partial last line (an interrupted run); its case runs "
+                  "again", file=sys.stderr)
         if csv_path.exists():
             wanted = set(keys)
             for row in read_csv(csv_path, tuple(module.FIELDS)):
@@ -307,7 +391,7 @@ def run(module: ModuleType, args: argparse.Namespace, command: str) -> dict:
     new: dict[tuple, dict] = {}
     bar = _progress(len(todo), module.NAME)
     try:
-        for case, row in evaluate_cases(module.evaluate, todo, workers, getattr(args, "cluster", None)):
+        for case, row in evaluate_cases(module.evaluate, todo, workers, cluster):
             row = _check_row(module, case, row)
             new[case_key(case, module.KEY_FIELDS)] = row
             if appender is not None:

@@ -3,20 +3,29 @@ and method, sweeping the time step dt and the solver tolerance (``stiction bench
 
 **Scenes and their exact answers** (error in metres, always):
 
-- ``cube-slide``: 1 kg cube thrown at v0 = 1 m/s, mu = 0.5: it stops after d = v0^2 / (2 mu g);
-  symplectic Euler (time stepping, MuJoCo) stops at d - v0 dt / 2, so that offset is removed
-  for them. error = max(\|x(T) - x0 - d'\|, max_t \|z - z0\|, max_t \|y - y0\|) (a hop counts).
+The methods that update x with the new velocity (time stepping and MuJoCo: symplectic Euler) are
+measured against the exact law's own discrete answer at their dt (:func:`slide_distance`), the ODE
+methods against the continuous one; each reference is exact to rounding (docs/benchmarks.md, "The
+references", measured).
+
+- ``cube-slide``: 1 kg cube thrown at v0 = 1 m/s, mu = 0.5: it stops after d = v0^2 / (2 mu g)
+  (continuous); symplectic Euler stops after N dt v0 - mu g dt^2 N (N + 1) / 2, N =
+  floor(v0 / (mu g dt)) (it sticks on the step the velocity would cross zero), which is
+  d - v0 dt / 2 + mu g dt^2 f (1 - f) / 2 with f the fractional part of v0 / (mu g dt).
+  error = max(\|x(T) - x0 - d'\|, max_t \|z - z0\|, max_t \|y - y0\|) (a hop counts).
 - ``cube-incline-stick`` (30 deg, mu = 0.6), ``two-cube-stack``, ``pinch`` (the cube held
   between two squeezing pads, robots/scenes/pinch.toml): nothing moves. error = the largest
   displacement of a free body's centre over the run.
 - ``cube-incline-slip`` (30 deg, mu = 0.5) and ``solo12-slope-slip`` (rigid Solo-12, 20 deg,
-  mu = 0.2): translation downhill at a = g (sin th - mu cos th): s(T) = a T^2 / 2 (+ a dt T / 2,
-  symplectic Euler's offset). error = max(\|x(T) - x0 - s(T)\|, max_t \|z - z0\|, max_t \|y - y0\|).
+  mu = 0.2): translation downhill at a = g (sin th - mu cos th): s(T) = a T^2 / 2 (symplectic
+  Euler from rest: a dt^2 k (k + 1) / 2 = a T^2 / 2 + a dt T / 2 at T = k dt, exactly).
+  error = max(\|x(T) - x0 - s(T)\|, max_t \|z - z0\|, max_t \|y - y0\|).
 - ``diagonal-push``: the cube of cube-slide from rest, pushed through its centre by
   F = 1.5 mu m g at 30 deg (body frame; stiction.casestudies.diagonal_push): the exact cone
   slides it along the push at a = 0.5 mu g. error = max(\|p_xy(T) - p0 - s(T) e_phi\|, max_t \|z - z0\|).
 - ``solo12-stand``: no closed form for the settling robot: a converged reference (exact law, default
-  solver, dt = 1e-5 s, tolerance 1e-11). error = max(\|base height(T) - reference\|, largest
+  solver, tolerance 1e-11, runs at dt = 1e-5 and 2e-5 s extrapolated to dt -> 0: 2 x(1e-5) - x(2e-5),
+  time stepping being first order here). error = max(\|base height(T) - reference\|, largest
   horizontal distance of a foot-sphere centre at T from the reference's).
 
 **Methods**: the formulations (exact, ccp, nakaoka, pyramid = 4 facets circumscribed, penalty
@@ -180,25 +189,58 @@ def _mass(sc) -> float:
     return float(sum(i.mass for i in sc.model.inertias))
 
 
+def slide_distance(v0: float, a: float, h: float, steps: int | None = None) -> float:
+    """Distance the exact law's time stepping slides a body thrown at v0 against a constant
+    friction deceleration a = mu g in `steps` steps of h (None: until it stops).
+
+    The scheme is symplectic Euler (eq. 65-70; src/cpp/include/stiction/simulator.hpp): v+ = v - a h,
+    then x+ = x + h v+. While v - a h >= 0 the contact slides with the full friction mu m g; on the
+    step where the velocity would cross zero the exact law needs less than the cone's edge to stop
+    it (m v / h < mu m g), so it sticks: v+ = 0, and that step adds h * 0 to x. With
+    N = floor(v0 / (a h)) sliding steps, v_k = v0 - k a h and, for k <= N,
+
+        x_k = k h v0 - a h^2 k (k + 1) / 2 = v0 t - a t^2 / 2 - a h t / 2   (t = k h);
+
+    afterwards x stays at x_N. Writing v0 / (a h) = N + f (0 <= f < 1), the stop
+    x_N = v0^2 / (2 a) - v0 h / 2 + a h^2 f (1 - f) / 2: the common formula v0^2/(2a) - v0 h/2 is
+    exact only when v0 / (a h) is an integer and is off by up to a h^2 / 8 otherwise."""
+    if not (v0 >= 0 and a > 0 and h > 0):
+        raise ValueError(f"slide_distance: needs v0 >= 0, a > 0, h > 0; got v0={v0!r}, a={a!r}, h={h!r}")
+    n = math.floor(v0 / (a * h))  # x_N is continuous in v0 / (a h) at the integers: rounding there is harmless
+    if steps is not None:
+        if steps < 0:
+            raise ValueError(f"slide_distance: steps must be >= 0, got {steps!r}")
+        n = min(n, int(steps))
+    return n * h * v0 - a * h * h * n * (n + 1) / 2
+
+
 def _exact_motion(name: str, sc, t: float, dt: float, symplectic: bool) -> np.ndarray:
-    """Displacement (3,) of the first free body at time t under the exact law (module doc)."""
+    """Displacement (3,) of the first free body at time t under the exact law (module doc).
+
+    symplectic: the exact law's own time stepping at dt (time stepping, MuJoCo), t = k dt, the
+    discrete answer of the scheme (x_k from k updates v+ = v + a dt, x+ = x + dt v+); else the
+    continuous answer (the ODE methods)."""
     kind = SCENES[name].kind
-    off = dt / 2 if symplectic else 0.0
+    k = int(round(t / dt))
     if kind == "slide":
         v0 = float(sc.v0[0])
         a = float(sc.mu) * G
-        stop = v0 / a
-        s = v0 * t - a * t * t / 2 if t < stop else v0 * v0 / (2 * a)
-        return np.array([s - (v0 * off if t >= stop else a * off * t), 0.0, 0.0])
-    if kind == "slope":
-        from ..simulator import sliding_acceleration  # noqa: PLC0415
+        if symplectic:
+            return np.array([slide_distance(v0, a, dt, k), 0.0, 0.0])
+        s = v0 * t - a * t * t / 2 if t < v0 / a else v0 * v0 / (2 * a)
+        return np.array([s, 0.0, 0.0])
+    if kind in ("slope", "push"):
+        # from rest at a constant acceleration: sum_{j=1..k} dt (j a dt) = a dt^2 k (k + 1) / 2
+        if kind == "slope":
+            from ..simulator import sliding_acceleration  # noqa: PLC0415
 
-        a = sliding_acceleration(sc)
-        return np.array([a * t * t / 2 + a * off * t, 0.0, 0.0])
-    if kind == "push":
-        a = (PUSH_RATIO - 1.0) * float(sc.mu) * G
+            a = sliding_acceleration(sc)
+        else:
+            a = (PUSH_RATIO - 1.0) * float(sc.mu) * G
+        s = a * dt * dt * k * (k + 1) / 2 if symplectic else a * t * t / 2
+        if kind == "slope":
+            return np.array([s, 0.0, 0.0])
         phi = math.radians(PUSH_PHI_DEG)
-        s = a * t * t / 2 + a * off * t
         return np.array([s * math.cos(phi), s * math.sin(phi), 0.0])
     return np.zeros(3)
 
@@ -217,15 +259,29 @@ def _motion_error(name: str, sc, positions: np.ndarray, t_end: float, dt: float,
     return max(abs(float(d[-1, 0] - target[0])), height, float(np.abs(d[:, 1]).max()))
 
 
-@functools.lru_cache(maxsize=None)
-def _reference(name: str, duration: float) -> tuple[float, tuple]:
-    """solo12-stand's converged reference: (base height, foot centres (4, 3)) at `duration`."""
+def _settled(name: str, duration: float, dt: float) -> np.ndarray:
+    """(base height, foot-sphere centres x y z ...) of the scene at `duration`, exact law at `dt`
+    and tolerance REFERENCE_TOL."""
     from ..simulator import Simulator  # noqa: PLC0415
 
-    sim = Simulator(_scene(name), dt=REFERENCE_DT, tolerance=REFERENCE_TOL, max_iterations=10000)
-    traj = sim.rollout(duration, record_every=int(round(duration / REFERENCE_DT)))
-    feet = sim.contact_centers(traj)[-1]
-    return float(traj.q[-1, 2]), tuple(map(tuple, feet))
+    sim = Simulator(_scene(name), dt=dt, tolerance=REFERENCE_TOL, max_iterations=10000)
+    traj = sim.rollout(duration, record_every=int(round(duration / dt)))
+    feet = np.asarray(sim.contact_centers(traj)[-1], dtype=float)
+    return np.concatenate([[float(traj.q[-1, 2])], feet.ravel()])
+
+
+@functools.lru_cache(maxsize=None)
+def _reference(name: str, duration: float) -> tuple[float, tuple]:
+    """solo12-stand's converged reference: (base height, foot centres (4, 3)) at `duration`.
+
+    Time stepping converges at first order in dt here (measured over 1 s: runs at 5e-6 and 1e-5 s
+    are 1.4e-9 m apart, at 1e-5 and 2e-5 s 2.8e-9 m), so the runs at REFERENCE_DT and 2 REFERENCE_DT
+    are extrapolated (Richardson: 2 x(h) - x(2h), second order: successive extrapolations differ
+    1 : 4). The plain run at 1e-5 s is 2.8e-9 m (1 s) / 6.0e-9 m (0.5 s) from the limit, the
+    extrapolation ~6e-12 / ~5e-11 m (docs/benchmarks.md, "The references")."""
+    fine, coarse = _settled(name, duration, REFERENCE_DT), _settled(name, duration, 2 * REFERENCE_DT)
+    ref = 2 * fine - coarse
+    return float(ref[0]), tuple(map(tuple, ref[1:].reshape(-1, 3)))
 
 
 def _reference_error(name: str, duration: float, base_z: float, feet: np.ndarray) -> float:
@@ -419,8 +475,13 @@ def cases(args) -> list[dict]:
     from . import mujoco_scenes as ms  # noqa: PLC0415
 
     quick = bool(getattr(args, "quick", False))
-    scenes = getattr(args, "scenes", None) or (QUICK_SCENES if quick else tuple(SCENES))
-    methods = getattr(args, "methods", None) or (QUICK_METHODS if quick else METHODS)
+    scenes, methods = getattr(args, "scenes", None), getattr(args, "methods", None)
+    # an option given empty is an error naming it, never the default
+    for flag, given in (("--scenes", scenes), ("--methods", methods)):
+        if given is not None and not len(given):
+            raise ValueError(f"work-precision: {flag}: empty list")
+    scenes = scenes if scenes is not None else (QUICK_SCENES if quick else tuple(SCENES))
+    methods = methods if methods is not None else (QUICK_METHODS if quick else METHODS)
     for s in scenes:
         if s not in SCENES:
             raise ValueError(f"work-precision: unknown scene {s!r} (known: {', '.join(SCENES)})")

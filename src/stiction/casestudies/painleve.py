@@ -288,7 +288,7 @@ def _simulate(region: str, theta_deg: float, mu: float) -> dict:
     states = traj.states[1:, 0]
     names = {0: "open", 1: "stick", 2: "slip", 3: "closed"}
     fractions = {names[k]: float(np.mean(states == k)) for k in names}
-    lam_t, lam_n = traj.lam[:, 0, 0], traj.lam[:, 0, 2]
+    lam_t, lam_n = traj.lam[1:, 0, 0], traj.lam[1:, 0, 2]  # (record 0: no step, NaN)
     # impulse of the contact force from the centre's momentum: m (vdot_com) = lambda + m g
     vcom = np.array([_world_velocity(q, v) for q, v in zip(traj.q, traj.v)])
     T = traj.t[-1] - traj.t[0]

@@ -296,7 +296,7 @@ def penalty_simulator_run(K: float, f_e: np.ndarray, beta: float, h: float = PEN
     sim.set_state(q=np.zeros(3), v=np.zeros(3), t=0.0)
     traj = sim.rollout(duration)
     return {"drift": float(np.linalg.norm(traj.q[-1, :2] - traj.q[0, :2])),
-            "max_force_ratio": float(np.linalg.norm(traj.lam[:, 0, :2], axis=1).max() / F_BOUND),
+            "max_force_ratio": float(np.linalg.norm(traj.lam[1:, 0, :2], axis=1).max() / F_BOUND),
             "penetration": float(-traj.q[-1, 2]), "all_converged": bool(traj.converged[1:].all())}
 
 

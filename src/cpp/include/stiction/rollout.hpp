@@ -50,7 +50,10 @@ struct Recording {
     Eigen::Index cols;
   };
   const std::vector<Field>& fields() const { return fields_; }
-  void record(const SimulatorModel& sim, const SimulatorData& d);
+  /// Appends d's state and its per-candidate values. `initial`: the rollout's first record, the
+  /// state before any step (contactsAtState ran on it): lam, states and anchor_lam NaN (no solve
+  /// led there); else the last step's forces and states.
+  void record(const SimulatorModel& sim, const SimulatorData& d, bool initial = false);
 
  private:
   std::vector<double> own_;

@@ -195,6 +195,15 @@ class SimulatorModel {
   /// The joints whose configuration holds a unit quaternion (free flyers, spherical) and where
   /// in q it starts (x, y, z, w): checked at a trajectory's first step.
   std::vector<std::pair<pinocchio::JointIndex, int>> quaternions;
+  /// A joint whose configuration space is a non-commutative Lie group, and the velocity
+  /// coordinates of its Lie algebra: the ODE modes correct their configuration increments there
+  /// by the dexp^-1 series (Runge-Kutta-Munthe-Kaas, integrate.cpp); every other joint's group
+  /// (R^n, SO(2)) commutes and needs no correction.
+  struct LieAlgebraJoint {
+    enum class Group { kSE3, kSE2, kSO3 } group;  ///< free flyer, planar, spherical
+    int idx_v = 0;
+  };
+  std::vector<LieAlgebraJoint> non_abelian_joints;
   /// The world's joints as treeOf describes them (revolute and prismatic: vector-space joints,
   /// q (+) v = q + v and q1 (-) q0 = q1 - q0 as Pinocchio's Lie groups compute them; free flyers),
   /// or empty when another kind is among them: the joint PD and the configuration update then go
@@ -370,7 +379,10 @@ class SimulatorData {
   std::unique_ptr<ContactProblem> problem;
   std::vector<int> problem_active;
   std::unique_ptr<ContactSolver> solver;
-  std::vector<Eigen::VectorXd> stage_v, stage_a;
+  /// ODE modes: per stage its velocity, acceleration and configuration rate in the Lie algebra
+  /// (dexp^-1 of the velocity); the step's start (q, v), a stage's increment and scratch.
+  std::vector<Eigen::VectorXd> stage_v, stage_a, stage_k;
+  Eigen::VectorXd ode_q0, ode_v0, ode_theta, ode_bracket, ode_bracket2, ode_q3, ode_v3, ode_theta3, ode_theta2, ode_v2;
   std::vector<int> part_fill;  ///< per part: rows placed so far (contactJacobians)
   std::vector<Eigen::Triplet<double>> triplets;  ///< the sparse A's entries, part by part, as last assembled
   std::vector<int> triplet_position;  ///< where each sits in A_sparse's compressed storage
@@ -418,6 +430,14 @@ Eigen::MatrixXd denseDelassus(const SimulatorData& sd);
 /// precision_floor > 1e-6). A solve that merely misses the tolerance is recorded
 /// (all_converged_step = false), not thrown.
 void step(const SimulatorModel& sim, SimulatorData& sd);
+
+/// The contacts of the current state (q, v) without a step, for a trajectory's first record:
+/// kinematics, detection and the contact Jacobians (stages 1-3) give sd.gaps (every candidate's
+/// signed distance), the active set with sd.candidate_rows, and sd.candidate_velocity = J v of the
+/// active candidates (0 for the others, as after a step). Nothing is solved: candidate_lambda and
+/// candidate_states keep the last step's. coal's cached GJK guesses are put back, so the next step
+/// computes exactly what it would have without this call.
+void contactsAtState(const SimulatorModel& sim, SimulatorData& sd);
 
 /// The contact problem (eq. 65) at the current state, for inspection and tests:
 /// fills sd.J, sd.A, sd.b (force level, eq. 27 with the given delta, zeta) and sd.active.
