@@ -362,6 +362,7 @@ class SimulatorSettings:
     min_dt: float
     mode: IntegrationMode
     ode_tolerance: float
+    rigid_body_passes: str
     solver: str
     time_limit: float
     tolerance: float

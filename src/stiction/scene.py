@@ -177,7 +177,9 @@ def load_scene(name_or_path: str | os.PathLike) -> Scene:
 def _quaternion_check(model: pin.Model, q: np.ndarray, field: str, strict: bool = True) -> np.ndarray:
     """Normalise the quaternions of free-flyer and spherical joints and the (cos θ, sin θ) pair
     of planar joints in q; a zero one (with `strict`, one whose norm is not within 10 % of 1:
-    likely a typo in a scene file) is an error naming the joint."""
+    likely a typo in a scene file), one whose norm is not a finite number (entries so large that
+    their squares overflow, e.g. (0, 0, 0, 1e300), which would normalise to zeros) or one that
+    is not a unit one after normalising is an error naming the joint and the value."""
     q = q.copy()
     for j in range(1, model.njoints):
         kind = model.joints[j].shortname()
@@ -186,13 +188,20 @@ def _quaternion_check(model: pin.Model, q: np.ndarray, field: str, strict: bool 
         if start is None:
             continue
         i = model.joints[j].idx_q + start
-        norm = float(np.linalg.norm(q[i:i + size]))
+        what = "quaternion (x, y, z, w)" if size == 4 else "(cos, sin) pair"
+        hint = "a unit quaternion (x, y, z, w)" if size == 4 else "cos and sin of the angle"
+        value = "(" + ", ".join(f"{x:.17g}" for x in q[i:i + size]) + ")"
+        where = f"{field}: the {what} of joint {model.names[j]!r} (entries {i}..{i + size - 1}) = {value}"
+        with np.errstate(over="ignore", invalid="ignore"):
+            norm = float(np.linalg.norm(q[i:i + size]))
+        if not math.isfinite(norm):
+            raise SceneError(f"{where} has no finite norm (its squares overflow or it is not finite); give {hint}")
         if not (0.9 < norm < 1.1 if strict else norm > 1e-12):
-            what = "quaternion" if size == 4 else "(cos, sin) pair"
-            hint = "a unit quaternion (x, y, z, w)" if size == 4 else "cos and sin of the angle"
-            raise SceneError(f"{field}: the {what} of joint {model.names[j]!r} (entries {i}..{i + size - 1}) has "
-                             f"norm {norm:g}; give {hint}")
-        q[i:i + size] /= norm
+            raise SceneError(f"{where} has norm {norm:g}; give {hint}")
+        unit = q[i:i + size] / norm
+        if not (np.isfinite(unit).all() and abs(float(np.linalg.norm(unit)) - 1.0) <= 1e-12):
+            raise SceneError(f"{where} does not normalise to a unit one (got {unit.tolist()}); give {hint}")
+        q[i:i + size] = unit
     return q
 
 

@@ -111,7 +111,10 @@ OVERRIDES = {
     "pyramid_inscribed": "pyramid formulation: corners on the cone (True) or facets tangent to it (False, default)",
     "penalty_stiffness": "penalty formulation: K in N/m per contact (default 1e5)",
     "penalty_damping": "penalty formulation: beta in s, damping K beta (default 1e-3)",
+    "rigid_body_passes": "fused (default: one pass per robot, a speed choice) | pinocchio (Pinocchio's own "
+                         "kinematics, crba, rnea, Cholesky and integrate: the reference)",
 }
+RIGID_BODY_PASSES = ("fused", "pinocchio")
 
 _MODES = {"timestep": 0, "rk4": 1, "ode": 1, "adaptive": 2}
 MAX_RECORD_BYTES = 4e9  # a trajectory larger than this is refused before simulating
@@ -134,7 +137,7 @@ class _ReadOnly:
 
     def __repr__(self) -> str:
         keys = ("dt", "mode", "delta", "zeta", "tolerance", "max_iterations", "solver", "formulation",
-                "ode_tolerance")
+                "ode_tolerance", "rigid_body_passes")
         return "SimulatorSettings(" + ", ".join(f"{k}={getattr(self._settings, k)!r}" for k in keys) + ")"
 
 
@@ -144,7 +147,8 @@ class Simulator:
     Overrides (keyword arguments; anything else is an error): see ``OVERRIDES`` —
     dt, duration, mode, delta, zeta, mu, tolerance, max_iterations, solver, ode_tolerance,
     formulation (exact, ccp, nakaoka, pyramid, penalty, pinocchio-admm, ...: docs/formulations.md)
-    and its parameters pyramid_facets, pyramid_inscribed, penalty_stiffness, penalty_damping.
+    and its parameters pyramid_facets, pyramid_inscribed, penalty_stiffness, penalty_damping,
+    rigid_body_passes (fused, the default, or pinocchio: Pinocchio's own passes, the reference).
     With another formulation than exact, ``converged`` (per step) is the formulation's own
     stopping test and ``residual`` stays the exact law's, the same yardstick for all.
 
@@ -220,6 +224,10 @@ class Simulator:
                              "step (eq. 83-84, Kikuuwe-Fujimoto): it needs mode 'timestep'")
         if "ode_tolerance" in overrides:
             s.ode_tolerance = _positive("ode_tolerance", overrides["ode_tolerance"])
+        passes = overrides.get("rigid_body_passes", "fused")
+        if not isinstance(passes, str) or passes not in RIGID_BODY_PASSES:
+            raise ValueError(f"rigid_body_passes must be one of {', '.join(RIGID_BODY_PASSES)}, got {passes!r}")
+        s.rigid_body_passes = passes
         return s
 
     @property

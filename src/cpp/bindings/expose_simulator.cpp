@@ -439,6 +439,9 @@ void exposeSimulator() {
     checkedMember(c, "warm_start", &SimulatorSettings::warm_start);
     checkedMember(c, "implicit_pd", &SimulatorSettings::implicit_pd,
                   "time stepping: joint PD implicit over the step (stable for any gains)");
+    checkedMember(c, "rigid_body_passes", &SimulatorSettings::rigid_body_passes,
+                  "'fused' (default: one pass per robot, tree.cpp; a speed choice) or 'pinocchio' (Pinocchio's "
+                  "forwardKinematics, crba, nonLinearEffects, Cholesky and integrate: the reference)");
     c.add_property(
         "tolerance", +[](const SimulatorSettings& s) { return s.solver_settings.tolerance; },
         +[](SimulatorSettings& s, const bp::object& x) {

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -19,6 +20,7 @@
 #include <pinocchio/algorithm/cholesky.hpp>
 #include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
 
 #include "stages.hpp"
 
@@ -100,18 +102,42 @@ void freeBodyScaling(SystemWork& w) {
 void partMassSolve(const SystemModel& part, pinocchio::Data& data, Eigen::VectorXd& x) {
   if (part.free_body)
     freeBodyMassSolve(data, x.data());
+  else if (part.pinocchio_passes)
+    pinocchio::cholesky::solve(part.model, data, x);
   else
     treeSolve(part, data, x);
+}
+
+// The message of a mass matrix that is not positive definite: where (robot, part, the first
+// coordinate whose pivot failed, in the factor's order: from the last) and the usual causes.
+std::string notPositiveDefinite(const std::string& robot, const SystemModel& part, const pinocchio::Data& data) {
+  const pinocchio::Model& model = part.model;
+  Eigen::Index k = model.nv - 1;
+  while (k > 0 && data.D[k] > 0.0) --k;
+  std::string joint = "?";
+  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+    if (k >= model.idx_vs[j] && k < model.idx_vs[j] + model.nvs[j]) joint = model.names[j];
+  std::ostringstream os;
+  os << "the mass matrix of " << (robot.empty() ? std::string("the model") : "robot '" + robot + "'")
+     << " (part '" << model.name << "') is not positive definite at this configuration: pivot " << data.D[k]
+     << " at its velocity coordinate " << k << " (joint '" << joint
+     << "'). Usual causes: a massless link (mass 0 and no rotational inertia), so that a joint's subtree has no "
+        "inertia about its axis (a massless end effector, a point mass on the joint's axis), "
+        "with zero armature on that joint; give the links mass and inertia, or the joint an armature "
+        "(model.armature)";
+  return os.str();
 }
 
 // M of one part (a robot's: already from this step's kinematics, compositeBackwardPass; a free
 // body's: crba), h kd + h^2 kp on its diagonal for an implicit PD over h > 0, and its factor
 // M = U D U^T, in w.data. Throws when M is not positive definite.
-void factorMass(const SystemModel& part, SystemWork& w, const JointControl& control, double implicit_pd_step) {
+void factorMass(const std::string& robot, const SystemModel& part, SystemWork& w, const JointControl& control,
+                double implicit_pd_step) {
   const pinocchio::Model& model = part.model;
   // q as Eigen::Ref: the instantiation libpinocchio ships (extern template), not a fresh one
   // here (a VectorXd argument made this file take 55 s to compile instead of 14 s).
-  if (part.free_body)  // (freeBodyKinematics fills no joint Jacobian)
+  // (freeBodyKinematics fills no joint Jacobian; rigid_body_passes "pinocchio": Pinocchio's M)
+  if (part.free_body || part.pinocchio_passes)
     pinocchio::crba(model, w.data, Eigen::Ref<const Eigen::VectorXd>(w.q), pinocchio::Convention::LOCAL);
   if (implicit_pd_step > 0.0) {
     // Implicit joint PD over a step h: tau(q+, v+) ~ kp (q_t - q - h v+) + kd (v_t - v+)
@@ -124,12 +150,11 @@ void factorMass(const SystemModel& part, SystemWork& w, const JointControl& cont
     }
   }
   // M = U D U^T by Pinocchio's tree-sparse Cholesky (cheaper than a dense LLT)
-  if (part.free_body)
+  if (part.free_body || part.pinocchio_passes)
     pinocchio::cholesky::decompose(model, w.data);
   else
     treeDecompose(part, w.data);
-  if (model.nv > 0 && !(w.data.D.minCoeff() > 0.0))
-    throw std::runtime_error("the mass matrix of '" + model.name + "' is not positive definite at this configuration");
+  if (model.nv > 0 && !(w.data.D.minCoeff() > 0.0)) throw std::runtime_error(notPositiveDefinite(robot, part, w.data));
 }
 
 // The coordinates J's rows can move: its nonzero columns and all their ancestors (Pinocchio's
@@ -168,9 +193,13 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
       for (int world : part.v_index) pd_on_diagonal = pd_on_diagonal || sd.control.kd[world] != 0.0 || sd.control.kp[world] != 0.0;
     const bool reuse = part.free_body && w.mass_factored && !pd_on_diagonal;
     w.mass_factored = part.free_body && !pd_on_diagonal;
-    if (!part.free_body) compositeBackwardPass(part, w.data, w.nle);  // M and nle (stage 1's terms)
+    if (part.pinocchio_passes)  // (M by crba in factorMass)
+      w.nle = pinocchio::nonLinearEffects(model, w.data, Eigen::Ref<const Eigen::VectorXd>(w.q),
+                                          Eigen::Ref<const Eigen::VectorXd>(w.v));
+    else if (!part.free_body)
+      compositeBackwardPass(part, w.data, w.nle);  // M and nle (stage 1's terms)
     if (!reuse) {
-      factorMass(part, w, sd.control, implicit_pd_step);
+      factorMass(sim.model.name, part, w, sd.control, implicit_pd_step);
       w.has_free_body_scaling = part.free_body;
       if (part.free_body) freeBodyScaling(w);
     }

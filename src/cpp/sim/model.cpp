@@ -9,6 +9,7 @@
 #include <string>
 
 #include <pinocchio/algorithm/joint-configuration.hpp>
+#include <pinocchio/multibody/joint/joints.hpp>
 
 #include "stiction/rk4_stability.hpp"
 #include "stiction/simulator.hpp"
@@ -26,6 +27,47 @@ void completeTangents(HalfSpace& h) {
   Eigen::Vector3d e = std::abs(h.normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
   h.tangent1 = (e - h.normal * h.normal.dot(e)).normalized();
   h.tangent2 = h.normal.cross(h.tangent1);  // (t1, t2, n) right-handed
+}
+
+// "robot 'name' (part 'root joint')": where a joint or a part is in the world, for messages.
+std::string whereInWorld(const pinocchio::Model& world, pinocchio::JointIndex j) {
+  while (j > 0 && world.parents[j] != 0) j = world.parents[j];
+  std::string where = world.name.empty() ? "the model" : "robot '" + world.name + "'";
+  if (j > 0) where += " (part '" + world.names[j] + "')";
+  return where;
+}
+
+// The axis of a joint "about any axis" (revolute, unbounded revolute, prismatic, helical), else
+// nullptr.
+const Eigen::Vector3d* unalignedAxis(const pinocchio::JointModel& joint) {
+  const auto& variant = joint.toVariant();
+  if (const auto* r = boost::get<pinocchio::JointModelRevoluteUnaligned>(&variant)) return &r->axis;
+  if (const auto* u = boost::get<pinocchio::JointModelRevoluteUnboundedUnaligned>(&variant)) return &u->axis;
+  if (const auto* p = boost::get<pinocchio::JointModelPrismaticUnaligned>(&variant)) return &p->axis;
+  if (const auto* h = boost::get<pinocchio::JointModelHelicalUnaligned>(&variant)) return &h->axis;
+  return nullptr;
+}
+
+// A joint about any axis needs a unit axis. Pinocchio uses the axis as given (its URDF parser
+// normalises it, a joint built in code is not): with |axis| != 1 its revolute "rotation" is not a
+// rotation (axis (0, 1, 1), q = 0.7: det 1.75) and a prismatic coordinate is not in metres, so
+// its own crba, rnea and Jacobians describe no rigid body. Refused rather than normalised: a
+// normalised model would then disagree with Pinocchio's results for the same pinocchio.Model.
+void checkJointAxes(const pinocchio::Model& world) {
+  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(world.njoints); ++j) {
+    const Eigen::Vector3d* axis = unalignedAxis(world.joints[j]);
+    if (axis == nullptr) continue;
+    const double norm = axis->norm();
+    if (std::isfinite(norm) && std::abs(norm - 1.0) <= 1e-12) continue;
+    std::ostringstream os;
+    os.precision(17);
+    os << "joint '" << world.names[j] << "' (" << world.joints[j].shortname() << ") of " << whereInWorld(world, j)
+       << ": axis (" << axis->x() << ", " << axis->y() << ", " << axis->z() << ") has norm " << norm
+       << ", not 1. Pinocchio uses a joint's axis as given (a revolute joint then turns by a matrix that is no "
+          "rotation, a prismatic joint's coordinate is not in metres), so the simulator refuses it: build the "
+          "joint with axis / |axis| (Pinocchio's URDF parser normalises the axis)";
+    throw std::invalid_argument(os.str());
+  }
 }
 
 // The joints among `joint` (a composite: its sub-joints) whose Lie group does not commute, as
@@ -49,8 +91,10 @@ void collectNonAbelian(const pinocchio::JointModel& joint, std::vector<Simulator
 }
 
 // The world's subtrees (children of the universe) as separate models: joints copied in
-// order (a parent before its children), with their placements, inertias and armature.
-void splitIntoSystems(const pinocchio::Model& world, std::vector<SystemModel>& systems,
+// order (a parent before its children), with their placements, inertias and armature. With
+// `fused`, robots get treeOf's description and single free flyers the free-body path; else
+// every part takes Pinocchio's passes.
+void splitIntoSystems(const pinocchio::Model& world, bool fused, std::vector<SystemModel>& systems,
                       std::vector<int>& joint_system, std::vector<pinocchio::JointIndex>& joint_local) {
   const auto njoints = static_cast<pinocchio::JointIndex>(world.njoints);
   joint_system.assign(njoints, -1);
@@ -85,8 +129,9 @@ void splitIntoSystems(const pinocchio::Model& world, std::vector<SystemModel>& s
   for (SystemModel& part : systems) {
     part.q_start = contiguousStart(part.q_index);
     part.v_start = contiguousStart(part.v_index);
-    part.free_body = part.model.njoints == 2 && part.model.joints[1].shortname() == "JointModelFreeFlyer";
-    if (!part.free_body) part.tree = treeOf(part.model);
+    part.pinocchio_passes = !fused;
+    part.free_body = fused && part.model.njoints == 2 && part.model.joints[1].shortname() == "JointModelFreeFlyer";
+    if (fused && !part.free_body) part.tree = treeOf(part.model);
     // each coordinate's root path from Pinocchio's own parents_fromRow (a Data of the part)
     const pinocchio::Data data(part.model);
     part.ancestors_start.assign(1, 0);
@@ -165,12 +210,19 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
     throw std::invalid_argument(
         "the penalty formulation integrates its springs by implicit Euler over the time step (Kikuuwe-Fujimoto, "
         "eq. 83-84): it needs mode 'timestep', not an ODE mode");
+  if (s.rigid_body_passes != "fused" && s.rigid_body_passes != "pinocchio")
+    throw std::invalid_argument("rigid_body_passes must be 'fused' or 'pinocchio', got '" + s.rigid_body_passes + "'");
+  const bool fused = s.rigid_body_passes == "fused";
+  checkJointAxes(model);
   for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j) {
-    if (model.joints[j].shortname() == "JointModelFreeFlyer") free_flyers.push_back(j);
+    const std::string kind = model.joints[j].shortname();
+    if (kind == "JointModelFreeFlyer") free_flyers.push_back(j);
+    if (kind == "JointModelFreeFlyer" || kind == "JointModelSpherical")
+      quaternions.emplace_back(j, model.idx_qs[j] + (kind == "JointModelFreeFlyer" ? 3 : 0));
     collectNonAbelian(model.joints[j], non_abelian_joints);
   }
-  tree = treeOf(model);
-  splitIntoSystems(model, systems, joint_system, joint_local);
+  if (fused) tree = treeOf(model);  // (else empty: Pinocchio's integrate and difference)
+  splitIntoSystems(model, fused, systems, joint_system, joint_local);
   slot_pair.assign(contacts.size(), -1);
   for (std::size_t p = 0; p < pairs.size(); ++p) {
     const GeometryPairContact& g = pairs[p];

@@ -1,5 +1,6 @@
 // One step: the stages of stages.hpp in order, with the state checks around them.
 #include <algorithm>
+#include <cmath>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -13,6 +14,23 @@ namespace stiction {
 using namespace stages;
 
 namespace {
+
+// Every quaternion of q a unit one (to 1e-9: integration keeps them within rounding). The
+// fused pass and Pinocchio read a quaternion as a rotation without normalising it: a zero or
+// scaled one would move the bodies wrongly and without a word. Simulator.set_state normalises.
+void checkQuaternions(const SimulatorModel& sim, const SimulatorData& sd) {
+  for (const auto& [joint, start] : sim.quaternions) {
+    const Eigen::Vector4d x = sd.q.segment<4>(start);
+    const double norm = x.norm();
+    if (std::abs(norm - 1.0) <= 1e-9) continue;
+    std::ostringstream os;
+    os.precision(17);
+    os << "q: the quaternion (x, y, z, w) of joint '" << sim.model.names[joint] << "' (q[" << start << ".."
+       << start + 3 << "]) = (" << x[0] << ", " << x[1] << ", " << x[2] << ", " << x[3] << ") has norm " << norm
+       << ", not 1: give a unit quaternion, or set the state with Simulator.set_state (which normalises)";
+    throw std::invalid_argument(os.str());
+  }
+}
 
 // Statistics to zero, the state's size checked, and at a trajectory's start (the first
 // step, or after q, v or t were assigned) the blow-up check's reference.
@@ -28,6 +46,7 @@ bool beginStep(const SimulatorModel& sim, SimulatorData& sd) {
                                 " entries and v nv = " + std::to_string(sim.model.nv));
   const bool first = sd.reference_speed < 0.0;
   if (first) {
+    checkQuaternions(sim, sd);
     sd.reference_speed = sim.model.nv > 0 ? sd.v.cwiseAbs().maxCoeff() : 0.0;
     sd.reference_time = sd.t;
     sd.reference_penetration = 0.0;

@@ -9,8 +9,10 @@
 // Measured on Solo-12 (18 coordinates, 13 joints): Pinocchio's forwardKinematics and
 // computeJointJacobians cost 1.6 us of a 7.8 us step, this pass 0.66 us (most of the difference:
 // loads that spanned two earlier stores, below). The joints here are the kinds robots are made
-// of (revolute and prismatic about x, y, z or any axis, free flyer); a part with any other joint
-// keeps Pinocchio's pass (treeOf returns an empty description), followed by worldFrameTerms.
+// of (revolute and prismatic about x, y, z or any unit axis, free flyer: SimulatorModel refuses a
+// non-unit axis); a part with any other joint keeps Pinocchio's pass (treeOf returns an empty
+// description), followed by worldFrameTerms. rigid_body_passes "pinocchio" skips this file's
+// passes altogether (Pinocchio's kinematics, crba, nonLinearEffects and Cholesky: the reference).
 #include <algorithm>
 #include <cmath>
 #include <limits>

@@ -21,6 +21,7 @@
 
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/SparseCore>
@@ -113,6 +114,13 @@ struct SimulatorSettings {
   FormulationSettings formulation_settings;  ///< pyramid facets, penalty K and beta (exact_solver: `solver`)
   bool warm_start = true;          ///< start each solve from the previous step's lambda
   bool implicit_pd = true;         ///< time stepping: the joint PD implicit in the step (stable for any gains)
+  /// The rigid-body passes (placements, joint Jacobians, M, nle, M's factor and solves, the
+  /// configuration update): "fused" (default: src/cpp/sim/tree.cpp's one pass per robot and the
+  /// free bodies' fixed-size code, a speed choice) or "pinocchio" (Pinocchio's own
+  /// forwardKinematics, computeJointJacobians, crba, nonLinearEffects, cholesky::decompose and
+  /// solve, integrate and difference for every part: the reference the fused passes are checked
+  /// against, docs/simulator.md).
+  std::string rigid_body_passes = "fused";
 };
 
 /// Joint-space control: tau = kp (q_target - q) + kd (v_target - v) + tau_ff on
@@ -155,7 +163,11 @@ struct SystemModel {
   int q_start = -1, v_start = -1;     ///< the first world coordinate when contiguous (else -1)
   /// One free-flyer joint: its mass matrix in its own frame (Pinocchio's LOCAL convention) is
   /// constant, factored once rather than every step (unless a joint PD adds to its diagonal).
+  /// (Never with rigid_body_passes "pinocchio": a free body is then a tree like any other.)
   bool free_body = false;
+  /// rigid_body_passes "pinocchio": M and nle by Pinocchio's crba and nonLinearEffects, M's factor
+  /// and solves by its cholesky::decompose and solve (tree empty, free_body false).
+  bool pinocchio_passes = false;
   /// Each coordinate's ancestors in M's tree (itself first, then up to the root: Pinocchio's
   /// parents_fromRow followed), coordinate k's at ancestors[ancestors_start[k], ancestors_start[k + 1]).
   /// A list walked by index: following parents_fromRow chains a load per step (its latency, ~6
@@ -180,6 +192,9 @@ class SimulatorModel {
 
   // derived
   std::vector<pinocchio::JointIndex> free_flyers;
+  /// The joints whose configuration holds a unit quaternion (free flyers, spherical) and where
+  /// in q it starts (x, y, z, w): checked at a trajectory's first step.
+  std::vector<std::pair<pinocchio::JointIndex, int>> quaternions;
   /// A joint whose configuration space is a non-commutative Lie group, and the velocity
   /// coordinates of its Lie algebra: the ODE modes correct their configuration increments there
   /// by the dexp^-1 series (Runge-Kutta-Munthe-Kaas, integrate.cpp); every other joint's group
