@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from stiction import _core
+from stiction.bench.work_precision import slide_distance
 from stiction.scene import build_scene
 from stiction.simulator import OVERRIDES, Simulator
 
@@ -62,12 +63,15 @@ def test_cold_solves_take_more_iterations_for_the_same_motion():
 
 
 def test_mu_override_changes_the_physics():
-    """cube-slide (v0 = 1 m/s): it stops after v0^2 / (2 mu g) - v0 h / 2 (symplectic time stepping)."""
+    """cube-slide (v0 = 1 m/s): symplectic time stepping stops it after slide_distance (the scheme's
+    exact discrete stop; measured within 7e-16 m). v0^2 / (2 mu g) - v0 h / 2 is 2.3e-7 m (mu = 0.25)
+    and 9.6e-7 m (mu = 0.8) short of it: v0 / (mu g h) = 407.75, 127.42 are no integers."""
     for mu in (0.25, 0.8):
         sim = Simulator("cube-slide", mu=mu, duration=0.6)
         traj = sim.rollout()
-        expected = 1.0 / (2 * mu * G) - 1.0 * sim.dt / 2
-        assert traj.q[-1, 0] - traj.q[0, 0] == pytest.approx(expected, abs=1e-6)
+        expected = slide_distance(1.0, mu * G, sim.dt)
+        assert abs((1.0 / (2 * mu * G) - 1.0 * sim.dt / 2) - expected) > 1e-7  # the old formula would fail
+        assert abs(traj.q[-1, 0] - traj.q[0, 0] - expected) <= 1e-12
         assert all(c.mu == mu for c in sim.scene.contacts) and sim.scene.mu == mu
     assert Simulator("cube-slide").scene.contacts[0].mu == 0.5  # the scene itself is untouched
 
@@ -202,6 +206,11 @@ def test_control_assignment_is_checked():
         sim.data.q_target = "0 0 0"
     with pytest.raises(ValueError, match=r"SimulatorData\.tau_ff has NaN"):  # a float64 array (the fast path)
         sim.data.tau_ff = np.array([0, 0, 0, 0, 0, math.inf])
+    with pytest.raises(ValueError, match=r"SimulatorData\.kd\[5\] is -0\.5: a joint gain must be >= 0"):
+        sim.data.kd = [0, 0, 0, 0, 0, -0.5]
+    with pytest.raises(ValueError, match=r"SimulatorData\.kp\[2\] is -1: a joint gain must be >= 0"):
+        sim.data.kp = np.array([0, 0, -1.0, 0, 0, 0])  # (the fast path)
+    sim.data.kd = [0, 0, 0, 0, 0, -0.0]  # -0.0 is 0
     tau = sim.data.tau_ff
     sim.data.tau_ff = [1, 2, 3, 4, 5, 6]  # a whole assignment writes into the same memory
     np.testing.assert_array_equal(tau, [1, 2, 3, 4, 5, 6])
