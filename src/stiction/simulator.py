@@ -151,9 +151,12 @@ class Simulator:
     Control: ``sim.data.kp``, ``.kd``, ``.q_target``, ``.v_target``, ``.tau_ff`` read as numpy
     *views* on the simulator's data: ``sim.data.tau_ff[:] = u`` (or ``[i] = x``) takes effect at the
     next step, as does assigning a whole array (``sim.data.tau_ff = u``: shape, dtype and
-    finiteness checked). State and outputs: ``sim.data.q``, ``.v`` and every array the last step
-    left (``A``, ``b``, ``gaps``, ``candidate_lambda``, ...) read as *read-only copies*: writing
-    into one raises. The supported way to set the state is :meth:`set_state`, which also
+    finiteness checked, and gains >= 0). An in-place write is checked by the next step, before it
+    moves anything: a NaN, an infinity or a negative gain raises ValueError naming the field and
+    index. State and outputs: ``sim.data.q``, ``.v`` and every array the last step left (``A``,
+    ``b``, ``gaps``, ``candidate_lambda``, ...) read as *read-only copies*, ``.active`` and
+    ``.states`` as tuples, ``.timings`` as a read-only mapping, ``.result`` as a copy with read-only
+    attributes and arrays: writing into one raises. The supported way to set the state is :meth:`set_state`, which also
     normalises quaternions; :meth:`reset` returns to the scene's initial state and control (into
     the same data: views taken before stay valid). ``sim.data`` is the same object for the
     simulator's life (it cannot be replaced).
