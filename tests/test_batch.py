@@ -6,6 +6,7 @@ import pytest
 
 import stiction
 from stiction import _core, problems
+from stiction.bench.work_precision import slide_distance
 from stiction.simulator import Batch, Simulator, batch_rollout
 
 
@@ -22,15 +23,33 @@ def test_a_batch_is_bit_identical_to_rollouts_one_by_one():
 
 
 def test_batch_of_initial_states_matches_the_closed_form():
-    """cube-slide thrown at v0: it stops after v0^2 / (2 mu g) - v0 h / 2, each run on its own thread."""
+    """cube-slide thrown at v0 (mu = 0.5, h = 1 ms): it stops after slide_distance, the symplectic
+    scheme's exact discrete stop (measured within 2e-15 m), each run on its own thread.
+    v0^2 / (2 mu g) - v0 h / 2 is 1.4e-7 to 4.6e-7 m short of it (v0 / (mu g h) is no integer)."""
     sim = Simulator("cube-slide")
     speeds = (0.5, 1.0, 1.5, 2.0)
     batch = sim.batch_rollout([(None, [v, 0, 0, 0, 0, 0]) for v in speeds], duration=0.6, threads=2)
     for v, traj in zip(speeds, batch.trajectories):
-        # (symplectic Euler: exact to within mu g h^2 / 8 = 6e-7 m)
-        assert traj.q[-1, 0] - traj.q[0, 0] == pytest.approx(v**2 / (2 * 0.5 * 9.81) - v * 1e-3 / 2, abs=1e-6)
+        expected = slide_distance(v, 0.5 * 9.81, 1e-3)
+        assert abs((v**2 / (2 * 0.5 * 9.81) - v * 1e-3 / 2) - expected) > 1e-7  # the old formula would fail
+        assert abs(traj.q[-1, 0] - traj.q[0, 0] - expected) <= 1e-12
     assert batch.stacked("q").shape == (4, 601, 7)
     assert sim.data.t == 0.0  # the simulator's own state is untouched
+
+
+def test_the_last_record_is_the_final_state_whatever_record_every():
+    """70 steps recorded every 8: records at steps 0, 8, ..., 64 and the final state, step 70 (before,
+    the trajectory stopped at 64, 6 steps short), alike in the C++ loop, the callback loop and a
+    batch; each record equal to the same step of an every-step rollout."""
+    every = Simulator("cube-slide", dt=3e-3).rollout(0.21)
+    recorded = list(range(0, 70, 8)) + [70]
+    trajs = [Simulator("cube-slide", dt=3e-3).rollout(0.21, record_every=8),
+             Simulator("cube-slide", dt=3e-3).rollout(0.21, record_every=8, callback=lambda s: None),
+             batch_rollout([Simulator("cube-slide", dt=3e-3)], 0.21, record_every=8).trajectories[0]]
+    for traj in trajs:
+        assert traj.t[-1] == every.t[-1] == pytest.approx(0.21, abs=1e-12)
+        for key in ("t", "q", "v", "lam", "gaps", "states", "residual", "converged", "dt"):
+            assert np.array_equal(getattr(traj, key), getattr(every, key)[recorded], equal_nan=True), key
 
 
 def test_a_failing_simulation_stops_alone_with_its_reason():
@@ -107,11 +126,12 @@ def test_a_rollout_records_into_the_arrays_it_returns():
     every = _core.rollout(sim.model, sim.data, 40, 1)
     q_end, v_end, t_end = np.array(sim.data.q), np.array(sim.data.v), sim.data.t
     sim2 = Simulator("solo12-stand")
-    sparse = _core.rollout(sim2.model, sim2.data, 40, 7)
-    assert sparse["q"].shape == (40 // 7 + 1, sim.model.nq) and sparse["timings"].shape == (6, 5)
+    sparse = _core.rollout(sim2.model, sim2.data, 40, 7)  # steps 0, 7, ..., 35 and the last, 40
+    recorded = list(range(0, 40, 7)) + [40]
+    assert sparse["q"].shape == (len(recorded), sim.model.nq) and sparse["timings"].shape == (7, 5)
     for key in ("t", "q", "v", "lam", "contact_velocity", "gaps", "states", "rows", "residual", "iterations",
                 "converged", "dt"):
-        assert np.array_equal(sparse[key], every[key][::7], equal_nan=True), key
+        assert np.array_equal(sparse[key], every[key][recorded], equal_nan=True), key
         assert np.isfinite(every[key][1:]).all(), key
         # record 0, before any step: no force and no solve's state (NaN), the rest recorded
         assert np.isnan(every[key][0]).all() if key in ("lam", "states") else np.isfinite(every[key][0]).all(), key

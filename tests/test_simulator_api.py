@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from stiction import _core
+from stiction.bench.work_precision import slide_distance
 from stiction.scene import build_scene
 from stiction.simulator import OVERRIDES, Simulator
 
@@ -62,12 +63,15 @@ def test_cold_solves_take_more_iterations_for_the_same_motion():
 
 
 def test_mu_override_changes_the_physics():
-    """cube-slide (v0 = 1 m/s): it stops after v0^2 / (2 mu g) - v0 h / 2 (symplectic time stepping)."""
+    """cube-slide (v0 = 1 m/s): symplectic time stepping stops it after slide_distance (the scheme's
+    exact discrete stop; measured within 7e-16 m). v0^2 / (2 mu g) - v0 h / 2 is 2.3e-7 m (mu = 0.25)
+    and 9.6e-7 m (mu = 0.8) short of it: v0 / (mu g h) = 407.75, 127.42 are no integers."""
     for mu in (0.25, 0.8):
         sim = Simulator("cube-slide", mu=mu, duration=0.6)
         traj = sim.rollout()
-        expected = 1.0 / (2 * mu * G) - 1.0 * sim.dt / 2
-        assert traj.q[-1, 0] - traj.q[0, 0] == pytest.approx(expected, abs=1e-6)
+        expected = slide_distance(1.0, mu * G, sim.dt)
+        assert abs((1.0 / (2 * mu * G) - 1.0 * sim.dt / 2) - expected) > 1e-7  # the old formula would fail
+        assert abs(traj.q[-1, 0] - traj.q[0, 0] - expected) <= 1e-12
         assert all(c.mu == mu for c in sim.scene.contacts) and sim.scene.mu == mu
     assert Simulator("cube-slide").scene.contacts[0].mu == 0.5  # the scene itself is untouched
 
@@ -202,6 +206,11 @@ def test_control_assignment_is_checked():
         sim.data.q_target = "0 0 0"
     with pytest.raises(ValueError, match=r"SimulatorData\.tau_ff has NaN"):  # a float64 array (the fast path)
         sim.data.tau_ff = np.array([0, 0, 0, 0, 0, math.inf])
+    with pytest.raises(ValueError, match=r"SimulatorData\.kd\[5\] is -0\.5: a joint gain must be >= 0"):
+        sim.data.kd = [0, 0, 0, 0, 0, -0.5]
+    with pytest.raises(ValueError, match=r"SimulatorData\.kp\[2\] is -1: a joint gain must be >= 0"):
+        sim.data.kp = np.array([0, 0, -1.0, 0, 0, 0])  # (the fast path)
+    sim.data.kd = [0, 0, 0, 0, 0, -0.0]  # -0.0 is 0
     tau = sim.data.tau_ff
     sim.data.tau_ff = [1, 2, 3, 4, 5, 6]  # a whole assignment writes into the same memory
     np.testing.assert_array_equal(tau, [1, 2, 3, 4, 5, 6])
@@ -212,6 +221,68 @@ def test_control_assignment_is_checked():
     sim.data.tau_ff = np.arange(12.0)[::2]  # strided
     np.testing.assert_array_equal(tau, [0, 2, 4, 6, 8, 10])
     assert np.all(sim.data.kp == sim.scene.kp) and np.all(sim.data.q_target == sim.scene.q_target)
+
+
+@pytest.mark.parametrize("field, index, value, shown", [
+    ("tau_ff", 4, math.nan, "nan"), ("q_target", 6, math.inf, "inf"), ("v_target", 0, -math.inf, "-inf"),
+    ("kp", 2, math.nan, "nan"), ("kd", 5, -1.0, "-1"), ("kp", 1, -1e-300, "-1e-300")])
+def test_a_bad_value_written_into_a_control_view_stops_the_next_step_naming_it(field, index, value, shown):
+    """An in-place write into a control view is not checked when it is made: the next step checks
+    every control input (finite; the gains kp, kd >= 0, as the scene schema and the implicit PD
+    assume) before it changes anything, and names the field and the index. (Before: a NaN ran into
+    "non-finite Delassus operator", a NaN gain "mass matrix not positive definite", and a negative
+    gain ran on.) The C++ loop (rollout) and a callback write alike; fixed, the simulation goes on."""
+    sim = Simulator("cube-slide")
+    sim.step()
+    q, t = sim.data.q, sim.data.t
+    getattr(sim.data, field)[index] = value
+    message = rf"sim\.data\.{field}\[{index}\] is {shown} at the step from t = 0\.001: a "
+    with pytest.raises(ValueError, match=message):
+        sim.step()
+    with pytest.raises(ValueError, match=message):
+        sim.rollout(0.01)
+    assert sim.data.t == t and np.array_equal(sim.data.q, q)  # nothing moved
+    getattr(sim.data, field)[index] = 0.0
+
+    def write(s):
+        if s.data.t > 0.0025:
+            getattr(s.data, field)[index] = value
+    with pytest.raises(ValueError, match=rf"sim\.data\.{field}\[{index}\] is {shown} at the step from t = 0\.003"):
+        sim.rollout(0.01, callback=write)
+    getattr(sim.data, field)[index] = 0.0
+    sim.rollout(0.002)
+    assert sim.data.t == pytest.approx(0.005)
+
+
+def test_the_last_step_s_snapshots_refuse_writes():
+    """sim.data.active, .states (tuples), .timings (a read-only mapping) and .result (a SolverResult
+    copied at each read: its attributes and arrays are read-only) are snapshots of the last step: a
+    write into one would be lost, so it raises. (Before: lists, a dict and a writable lam, whose
+    writes were silently dropped.)"""
+    sim = Simulator("cube-slide")
+    sim.step()
+    d = sim.data
+    bottom = tuple(int(i) for i in np.flatnonzero(np.abs(d.gaps) <= 1e-9))  # (the top corners: 0.1 m up)
+    assert len(bottom) == 4 and d.active == bottom and len(d.states) == 8
+    assert [d.states[i] for i in bottom] == [_core.ContactState.slip] * 4  # thrown at 1 m/s
+    with pytest.raises(TypeError):
+        d.active[0] = 5
+    with pytest.raises(TypeError):
+        d.states[0] = _core.ContactState.open
+    with pytest.raises(AttributeError):
+        d.active.append(4)
+    assert set(d.timings) == {"kinematics", "delassus", "solve", "integrate", "total"}
+    assert d.timings["total"] >= d.timings["solve"] > 0.0
+    with pytest.raises(TypeError):
+        d.timings["solve"] = 0.0
+    r = d.result
+    assert r.converged and r.lam.shape == r.u.shape == (12,)
+    for name in ("lam", "u"):
+        with pytest.raises(ValueError, match="read-only"):
+            getattr(r, name)[0] = 0.0
+    with pytest.raises(AttributeError):
+        r.iterations = 0
+    assert np.array_equal(d.result.lam, r.lam) and d.result is not r  # a copy at each read
 
 
 def test_state_and_outputs_are_read_only():

@@ -158,16 +158,19 @@ def test_identity_keys_are_the_inputs():
         assert s["contacts"] == 8
 
 
-@pytest.mark.parametrize("record_every", [1, 7])
+@pytest.mark.parametrize("record_every", [1, 7, 8])
 def test_duration_and_steps_count_the_rollout(record_every):
     """duration: the simulated time asked for; steps: the number of steps taken (0.21 s / 3 ms =
-    70), whatever the recording interval; recorded_steps: the records after the first. (Before,
-    steps counted records: 10 here with record_every = 7.) The adaptive mode records every step."""
+    70), whatever the recording interval; recorded_steps: the records after the first, the last
+    being the final state even when 70 is no multiple of record_every (8: 8 records 8 steps
+    apart, then one 6 steps on). (Before, steps counted records: 10 here with record_every = 7;
+    and with 8 the trajectory ended at step 64, its duration 0.192 s.) The adaptive mode records
+    every step."""
     sim = Simulator("cube-slide", dt=3e-3)
     traj = sim.rollout(0.21, record_every=record_every)
     s = sim.summary(traj)
     assert s["duration"] == pytest.approx(0.21, abs=1e-12)
-    assert s["steps"] == 70 and s["recorded_steps"] == 70 // record_every
+    assert s["steps"] == 70 and s["recorded_steps"] == -(-70 // record_every)
     again = sim.summary(sim.rollout(0.21, record_every=record_every))  # continues from t = 0.21 s
     assert again["duration"] == pytest.approx(0.21, abs=1e-12) and again["steps"] == 70
     sim = Simulator("cube-slide", mode="adaptive", dt=1e-3, delta=2e-3)

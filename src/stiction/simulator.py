@@ -155,9 +155,12 @@ class Simulator:
     Control: ``sim.data.kp``, ``.kd``, ``.q_target``, ``.v_target``, ``.tau_ff`` read as numpy
     *views* on the simulator's data: ``sim.data.tau_ff[:] = u`` (or ``[i] = x``) takes effect at the
     next step, as does assigning a whole array (``sim.data.tau_ff = u``: shape, dtype and
-    finiteness checked). State and outputs: ``sim.data.q``, ``.v`` and every array the last step
-    left (``A``, ``b``, ``gaps``, ``candidate_lambda``, ...) read as *read-only copies*: writing
-    into one raises. The supported way to set the state is :meth:`set_state`, which also
+    finiteness checked, and gains >= 0). An in-place write is checked by the next step, before it
+    moves anything: a NaN, an infinity or a negative gain raises ValueError naming the field and
+    index. State and outputs: ``sim.data.q``, ``.v`` and every array the last step left (``A``,
+    ``b``, ``gaps``, ``candidate_lambda``, ...) read as *read-only copies*, ``.active`` and
+    ``.states`` as tuples, ``.timings`` as a read-only mapping, ``.result`` as a copy with read-only
+    attributes and arrays: writing into one raises. The supported way to set the state is :meth:`set_state`, which also
     normalises quaternions; :meth:`reset` returns to the scene's initial state and control (into
     the same data: views taken before stay valid). ``sim.data`` is the same object for the
     simulator's life (it cannot be replaced).
@@ -290,7 +293,10 @@ class Simulator:
         current state. The loop runs in C++ unless a `callback(simulator)` is given, which then
         runs before every step (e.g. to set data.tau_ff or data.q_target). A duration shorter
         than one step is refused (one that rounds to 0 steps too: 0.5 dt rounds to 0); otherwise
-        round(duration / dt) steps are taken."""
+        round(duration / dt) steps are taken. The trajectory records the start, every
+        `record_every`-th step and the final state: when the step count is not a multiple of
+        `record_every`, its last record follows fewer steps than the others (its `dt` is the step's,
+        so the summary's `steps` and `duration` still count the whole rollout)."""
         duration = self.duration if duration is None else _positive("duration", duration)
         if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
             raise ValueError(f"record_every must be an integer >= 1, got {record_every!r}")
@@ -307,7 +313,7 @@ class Simulator:
                              f"one rollout takes ({MAX_STEPS:.0e}); use a larger dt or a shorter duration")
         n = int(round(steps))
         nc = self.model.num_candidates
-        record_bytes = (n // record_every + 1) * (self.model.nq + self.model.nv + 8 * nc + 12) * 8
+        record_bytes = (-(-n // record_every) + 1) * (self.model.nq + self.model.nv + 8 * nc + 12) * 8
         if record_bytes > MAX_RECORD_BYTES:
             raise ValueError(f"recording {n} steps every {record_every} would take {record_bytes / 1e9:.1f} GB; "
                              f"record less often (record_every = {math.ceil(record_bytes / MAX_RECORD_BYTES * record_every)}"
@@ -319,7 +325,7 @@ class Simulator:
             for k in range(1, n + 1):
                 callback(self)
                 r = _rollout(self.model, self.data, 1, 1)
-                if k % record_every == 0:
+                if k % record_every == 0 or k == n:  # (the last state too, as the C++ loop)
                     chunks.append({key: val[1:] for key, val in r.items()})
             rec = {key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]}
         return self._trajectory(rec)

@@ -5,12 +5,47 @@
 #include <unordered_set>
 
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 #include <eigenpy/eigenpy.hpp>
 
 namespace stiction {
 namespace python {
+
+namespace {
+
+struct NdArrayToPython {
+  static PyObject* convert(const NdArray& a) { return bp::incref(a.array.ptr()); }
+  static const PyTypeObject* get_pytype() { return &PyArray_Type; }
+};
+struct ReadOnlyMappingToPython {
+  static PyObject* convert(const ReadOnlyMapping& m) { return bp::incref(m.proxy.ptr()); }
+  static const PyTypeObject* get_pytype() { return &PyDictProxy_Type; }
+};
+
+}  // namespace
+
+void registerArrayConverters() {
+  bp::to_python_converter<NdArray, NdArrayToPython, true>();
+  bp::to_python_converter<ReadOnlyMapping, ReadOnlyMappingToPython, true>();
+}
+
+NdArray readOnlyCopy(const Eigen::VectorXd& x) {
+  npy_intp size = static_cast<npy_intp>(x.size());
+  PyObject* array = PyArray_SimpleNew(1, &size, NPY_DOUBLE);
+  if (array == nullptr) bp::throw_error_already_set();
+  auto* a = reinterpret_cast<PyArrayObject*>(array);
+  if (size > 0) std::memcpy(PyArray_DATA(a), x.data(), static_cast<std::size_t>(size) * sizeof(double));
+  PyArray_CLEARFLAGS(a, NPY_ARRAY_WRITEABLE);
+  return {bp::object(bp::handle<>(array))};
+}
+
+ReadOnlyMapping readOnlyMapping(const bp::dict& items) {
+  PyObject* proxy = PyDictProxy_New(items.ptr());
+  if (proxy == nullptr) bp::throw_error_already_set();
+  return {bp::object(bp::handle<>(proxy))};
+}
 
 namespace {
 

@@ -27,6 +27,23 @@ bp::list pyList(const Container& items) {
   return out;
 }
 
+/// A numpy array made by the bindings (a view or a read-only copy), returned as it is; a type of its
+/// own so that the signatures in the docstrings (and the stubs made from them) say numpy.ndarray.
+struct NdArray {
+  bp::object array;
+};
+/// A read-only float64 numpy copy of a vector (one allocation and a memcpy): a write into it raises
+/// instead of being silently lost.
+NdArray readOnlyCopy(const Eigen::VectorXd& x);
+/// A read-only view of a dict (types.MappingProxyType): item assignment raises TypeError. The
+/// signatures say mappingproxy.
+struct ReadOnlyMapping {
+  bp::object proxy;
+};
+ReadOnlyMapping readOnlyMapping(const bp::dict& items);
+/// The to-Python converters of NdArray and ReadOnlyMapping (module.cpp, before any expose function).
+void registerArrayConverters();
+
 /// Raise TypeError(message) (never returns).
 [[noreturn]] void raiseTypeError(const std::string& message);
 

@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <sstream>
 
 #include "convert.hpp"
 #include "expose.hpp"
@@ -66,17 +67,17 @@ std::shared_ptr<SimulatorData> makeSimulatorData(const bp::object& sim) {
 //   would be silently lost; a read-only array makes it raise instead.
 // Whole-array assignment goes through setChecked: a list of floats is accepted, None / str /
 // complex raise TypeError, a wrong size or a NaN ValueError.
-/// A numpy array made here (a view or a read-only copy), returned as it is; a type of its own so
-/// that the signatures in the docstrings (and the stubs made from them) say numpy.ndarray.
-struct NdArray {
-  bp::object array;
-};
-struct NdArrayToPython {
-  static PyObject* convert(const NdArray& a) { return bp::incref(a.array.ptr()); }
-  static const PyTypeObject* get_pytype() { return &PyArray_Type; }
-};
+// A joint gain (kp, kd) below 0: ValueError naming the first such entry (the step refuses it too).
+void checkGain(const double* x, Eigen::Index size, const char* name) {
+  for (Eigen::Index i = 0; i < size; ++i)
+    if (x[i] < 0.0) {
+      std::ostringstream os;
+      os << "SimulatorData." << name << "[" << i << "] is " << x[i] << ": a joint gain must be >= 0";
+      throw std::invalid_argument(os.str());
+    }
+}
 
-void setChecked(Eigen::VectorXd& dst, const bp::object& x, const char* name) {
+void setChecked(Eigen::VectorXd& dst, const bp::object& x, const char* name, bool gain = false) {
   // The common case first: a contiguous float64 numpy vector of the right size, copied without the
   // general conversion's temporaries (~0.2 us against ~3 us for Solo-12's tau_ff). memmove: x may be
   // a view of dst itself.
@@ -87,12 +88,14 @@ void setChecked(Eigen::VectorXd& dst, const bp::object& x, const char* name) {
       const Eigen::Map<const Eigen::VectorXd> v(static_cast<const double*>(PyArray_DATA(a)), dst.size());
       if (!v.allFinite())
         throw std::invalid_argument(std::string("SimulatorData.") + name + " has NaN or infinite entries");
+      if (gain) checkGain(v.data(), v.size(), name);
       if (dst.size() > 0) std::memmove(dst.data(), v.data(), static_cast<std::size_t>(dst.size()) * sizeof(double));
       return;
     }
   }
   const Eigen::VectorXd v = toVector(x, std::string("SimulatorData.") + name, dst.size());
   if (!v.allFinite()) throw std::invalid_argument(std::string("SimulatorData.") + name + " has NaN or infinite entries");
+  if (gain) checkGain(v.data(), v.size(), name);
   dst = v;  // a copy into dst's own memory (same size: no reallocation), never a move: views point into it
 }
 
@@ -110,17 +113,6 @@ NdArray viewOf(const bp::object& owner, Eigen::VectorXd& x) {
   return {bp::object(bp::handle<>(array))};
 }
 
-/// A read-only float64 numpy copy of a vector (one allocation and a memcpy).
-NdArray readOnlyCopy(const Eigen::VectorXd& x) {
-  npy_intp size = static_cast<npy_intp>(x.size());
-  PyObject* array = PyArray_SimpleNew(1, &size, NPY_DOUBLE);
-  if (array == nullptr) bp::throw_error_already_set();
-  auto* a = reinterpret_cast<PyArrayObject*>(array);
-  if (size > 0) std::memcpy(PyArray_DATA(a), x.data(), static_cast<std::size_t>(size) * sizeof(double));
-  PyArray_CLEARFLAGS(a, NPY_ARRAY_WRITEABLE);
-  return {bp::object(bp::handle<>(array))};
-}
-
 /// A read-only numpy copy of a matrix (eigenpy's conversion, its shapes unchanged).
 template <typename Matrix>
 NdArray readOnlyCopy(const Matrix& x) {
@@ -134,11 +126,14 @@ template <Eigen::VectorXd JointControl::*member>
 void addControl(bp::class_<SimulatorData, std::shared_ptr<SimulatorData>, boost::noncopyable>& cls, const char* name,
                 const char* doc) {
   const std::string label = name;
+  const bool gain = label == "kp" || label == "kd";
   auto get = [](const bp::object& self) {
     SimulatorData& d = bp::extract<SimulatorData&>(self)();
     return viewOf(self, d.control.*member);
   };
-  auto set = [label](SimulatorData& d, const bp::object& x) { setChecked(d.control.*member, x, label.c_str()); };
+  auto set = [label, gain](SimulatorData& d, const bp::object& x) {
+    setChecked(d.control.*member, x, label.c_str(), gain);
+  };
   cls.add_property(name, bp::make_function(get, bp::default_call_policies(),
                                            boost::mpl::vector<NdArray, const bp::object&>()),
                    bp::make_function(set, bp::default_call_policies(),
@@ -195,20 +190,18 @@ NdArray get_candidate_rows(const SimulatorData& d) {
   return readOnlyCopy(Eigen::VectorXi(
       Eigen::Map<const Eigen::VectorXi>(d.candidate_rows.data(), static_cast<Eigen::Index>(d.candidate_rows.size()))));
 }
-bp::list get_active(const SimulatorData& d) {
-  return pyList(d.active);
-}
-bp::list get_states(const SimulatorData& d) {
-  return pyList(d.candidate_states);
-}
-bp::dict get_timings(const SimulatorData& d) {
+// Snapshots of the last step, immutable so that a write raises instead of being lost: tuples, and
+// a read-only mapping for the timings.
+bp::tuple get_active(const SimulatorData& d) { return bp::tuple(pyList(d.active)); }
+bp::tuple get_states(const SimulatorData& d) { return bp::tuple(pyList(d.candidate_states)); }
+ReadOnlyMapping get_timings(const SimulatorData& d) {
   bp::dict out;
   out["kinematics"] = d.timings.kinematics;
   out["delassus"] = d.timings.delassus;
   out["solve"] = d.timings.solve;
   out["integrate"] = d.timings.integrate;
   out["total"] = d.timings.total;
-  return out;
+  return readOnlyMapping(out);
 }
 
 const SimulatorModel& simArg(const bp::object& x, const char* fn) {
@@ -288,7 +281,7 @@ bp::dict recordingViews(const Recording& rec, const bp::object& buffer) {
   return out;
 }
 
-/// Run n steps in C++ (the GIL released), recording every `every`-th state (and the first) into
+/// Run n steps in C++ (the GIL released), recording every `every`-th state (the first and the last too) into
 /// the memory of the arrays returned: written once, not copied (the copy and the page faults of
 /// its fresh memory were ~0.2 us of a 5.5 us robot step).
 bp::dict rollout(const bp::object& sim_, const bp::object& data_, const bp::object& n_steps_,
@@ -365,7 +358,6 @@ SimulatorSettings settingsOf(const SimulatorModel& s) { return s.settings; }
 }  // namespace
 
 void exposeSimulator() {
-  bp::to_python_converter<NdArray, NdArrayToPython, true>();
   {
     bp::class_<HalfSpace> c("HalfSpace", "Free space {x : normal . x >= offset}; a ground or a wall.");
     checkedMember(c, "name", &HalfSpace::name);
@@ -500,7 +492,7 @@ void exposeSimulator() {
       .add_property("M", &get_M)
       .add_property("tau", &get_tau)
       .add_property("nle", &get_nle, "C(q, v) v + g(q) at the last problem built")
-      .add_property("active", &get_active)
+      .add_property("active", &get_active, "indices of the candidates in the last problem (a tuple)")
       .add_property("candidate_lambda", &get_candidate_lambda)
       .add_property("anchor_lambda", &get_anchor_lambda)
       .add_property("contact_velocity", &get_candidate_velocity, "3 x candidates: J v after the step")
@@ -513,10 +505,14 @@ void exposeSimulator() {
       .add_property("pair_t1", &get_pair_t1,
                     "3 x candidates: each coal pair slot's first tangent (rows t1, t2, n: the slot's lambda)")
       .add_property("pair_t2", &get_pair_t2, "3 x candidates: each coal pair slot's second tangent")
-      .add_property("states", &get_states)
+      .add_property("states", &get_states, "per candidate: its ContactState at the last step (a tuple)")
       .add_property("rows", &get_candidate_rows, "per candidate: rows in the last problem (0: inactive)")
-      .add_property("result", &get_result)
-      .add_property("timings", &get_timings)
+      .add_property("result", &get_result,
+                    "the last solve's SolverResult: a snapshot (a copy at each read; its attributes and "
+                    "arrays are read-only)")
+      .add_property("timings", &get_timings,
+                    "the last step's phase times in microseconds: kinematics, delassus, solve, integrate, "
+                    "total (a read-only mapping)")
       .def_readonly("rhs_evaluations", &SimulatorData::rhs_evaluations)
       .def_readonly("last_dt", &SimulatorData::last_dt)
       .def_readonly("iterations_step", &SimulatorData::iterations_step)

@@ -108,8 +108,9 @@ std::shared_ptr<Solver> makeSolverObject(const bp::object& name) {
   return std::make_shared<Solver>(toStringArg(name, "Solver: name"));
 }
 
-Eigen::VectorXd lamOf(const SolverResult& r) { return r.lam; }
-Eigen::VectorXd uOf(const SolverResult& r) { return r.u; }
+// Read-only: each read is a fresh copy, so a write into it would be silently lost.
+NdArray lamOf(const SolverResult& r) { return readOnlyCopy(r.lam); }
+NdArray uOf(const SolverResult& r) { return readOnlyCopy(r.u); }
 bp::list statesOf(const SolverResult& r) {
   return pyList(r.states);
 }
@@ -247,8 +248,8 @@ void exposeSolver() {
       .def("__repr__", &stageRepr);
 
   bp::class_<SolverResult>("SolverResult", "Outcome of a solve; every solver reports the same residual.")
-      .add_property("lam", &lamOf, "lambda (num_rows)")
-      .add_property("u", &uOf, "A lambda - b (num_rows)")
+      .add_property("lam", &lamOf, "lambda (num_rows; a read-only copy)")
+      .add_property("u", &uOf, "A lambda - b (num_rows; a read-only copy)")
       .add_property("states", &statesOf, "ContactState per block")
       .def_readonly("iterations", &SolverResult::iterations)
       .def_readonly("converged", &SolverResult::converged, "status == SolveStatus.converged")

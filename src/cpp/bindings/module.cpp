@@ -3,12 +3,14 @@
 #include <boost/python.hpp>
 #include <eigenpy/eigenpy.hpp>
 
+#include "convert.hpp"
 #include "expose.hpp"
 
 BOOST_PYTHON_MODULE(_core) {
   eigenpy::enableEigenPy();
   boost::python::scope().attr("__doc__") =
       "Compiled core of stiction: the contact problem of eq. 65 and its solvers.";
+  stiction::python::registerArrayConverters();  // (first: the signatures of every function name their types)
   stiction::python::exposeProblem();
   stiction::python::exposeSolver();
   stiction::python::exposeSimulator();

@@ -45,11 +45,11 @@ std::vector<Array> arrays(const SimulatorModel& sim) {
 std::size_t Recording::size(const SimulatorModel& sim, int n_steps, int every) {
   std::size_t per_record = 0;
   for (const Array& a : arrays(sim)) per_record += static_cast<std::size_t>(a.cols < 0 ? 1 : a.cols);
-  return static_cast<std::size_t>(n_steps / every + 1) * per_record;
+  return static_cast<std::size_t>(count(n_steps, every)) * per_record;
 }
 
 void Recording::allocate(const SimulatorModel& sim, int n_steps, int every, double* storage) {
-  const Eigen::Index n = n_steps / every + 1;
+  const Eigen::Index n = count(n_steps, every);
   const std::size_t total = size(sim, n_steps, every);
   if (storage == nullptr) {
     own_.resize(total);
@@ -86,7 +86,7 @@ void Recording::clear() {
 }
 
 bool Recording::fits(const SimulatorModel& sim, int n_steps, int every) const {
-  return t.data() != nullptr && t.size() == n_steps / every + 1 && q.cols() == sim.model.nq &&
+  return t.data() != nullptr && t.size() == count(n_steps, every) && q.cols() == sim.model.nq &&
          v.cols() == sim.model.nv && gaps.cols() == sim.numCandidates() &&
          anchor_lam.cols() == 3 * static_cast<Eigen::Index>(sim.anchors.size());
 }
@@ -132,13 +132,15 @@ void checkCounts(int n_steps, int every) {
 }
 
 // The first record is the state the rollout starts from, with its own contacts (gaps, rows,
-// J v: contactsAtState), not those of the step that led to it (or of none: zeros).
+// J v: contactsAtState), not those of the step that led to it (or of none: zeros). The last is
+// the final state even when n_steps is not a multiple of `every` (else the trajectory would end
+// up to every - 1 steps early, and a summary's duration with it).
 void run(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out) {
   contactsAtState(sim, d);
   out.record(sim, d, /*initial=*/true);
   for (int k = 1; k <= n_steps; ++k) {
     step(sim, d);
-    if (k % every == 0) out.record(sim, d);
+    if (k % every == 0 || k == n_steps) out.record(sim, d);
   }
 }
 

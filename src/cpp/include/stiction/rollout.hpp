@@ -12,7 +12,8 @@
 
 namespace stiction {
 
-/// Every `every`-th state of a rollout (and the first), row per record. The arrays are views of
+/// Every `every`-th state of a rollout, the first and the last (when n_steps is not a multiple of
+/// `every`, the last record follows fewer than `every` steps), row per record. The arrays are views of
 /// one block of doubles: its own, or one the caller lays them out in (allocate), such as the
 /// memory of the arrays Python receives, so a recording is written once and never copied.
 struct Recording {
@@ -34,9 +35,14 @@ struct Recording {
   Recording(const Recording&) = delete;
   Recording& operator=(const Recording&) = delete;
 
-  /// The doubles n_steps / every + 1 records of `sim` take, every array in one block.
+  /// The records of a rollout of n_steps recording every `every`-th: the first, one per `every`
+  /// steps, and the last state when n_steps is not a multiple of `every` (ceil(n_steps / every) + 1).
+  static Eigen::Index count(int n_steps, int every) {
+    return static_cast<Eigen::Index>(n_steps / every + 1 + (n_steps % every != 0 ? 1 : 0));
+  }
+  /// The doubles count() records of `sim` take, every array in one block.
   static std::size_t size(const SimulatorModel& sim, int n_steps, int every);
-  /// Lays the arrays out for n_steps / every + 1 records of `sim`, filled with NaN: in `storage`
+  /// Lays the arrays out for count() records of `sim`, filled with NaN: in `storage`
   /// (size() doubles), or when it is null in a block of its own.
   void allocate(const SimulatorModel& sim, int n_steps, int every, double* storage = nullptr);
   /// True when the arrays are laid out for these counts (allocate need not run again).
@@ -61,7 +67,7 @@ struct Recording {
   std::size_t laid_out_ = 0;   // doubles in the block
 };
 
-/// n_steps of `d` from its current state, recording every `every`-th (into `out` as laid out by
+/// n_steps of `d` from its current state, recording every `every`-th and the last (into `out` as laid out by
 /// allocate for these counts, else allocated here). Throws std::invalid_argument for bad counts; a
 /// step that throws propagates (the recording keeps what came before it).
 void rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out);
