@@ -154,14 +154,17 @@ class Server:
         self.proc.stdin.write(json.dumps(spec) + "\n")
         self.proc.stdin.flush()
         deadline = time.monotonic() + timeout + startup
-        line = ""
+        line, closed = "", False
         while time.monotonic() < deadline:
             ready, _, _ = select.select([self.proc.stdout], [], [], max(0.0, deadline - time.monotonic()))
             if ready:
                 line = self.proc.stdout.readline()
+                closed = not line  # end of file: the helper has exited (or is exiting)
                 break
         if not line:
-            crashed = self.proc.poll() is not None
+            # A closed pipe is a crash even before the exit can be seen (poll() may still say
+            # running for a moment after the process closed its stdout; seen on a loaded machine).
+            crashed = closed or self.proc.poll() is not None
             self.stop()
             return {"error": "crashed" if crashed else "time limit"}
         out = json.loads(line)
