@@ -121,36 +121,46 @@ def check(A, b, mu, which, at_scale_one, compare):
             true = natural_map_80_digits(A, b, mu, r.lam)
             if not true <= TOL:
                 failures.append(f"{name}: converged, but the 80-digit relative residual is {mpmath.nstr(true, 3)}")
+        if which == "b" and np.isfinite(r.relative_residual):
+            # u and the exact-law measures came back to the caller's scale (computed on b 2^-c)
+            big = np.abs(b).max()
+            b_norm = np.linalg.norm(b / big) * big  # (numpy's own norm squares 1e-300 to 0)
+            if not np.allclose(r.u, A @ r.lam - b, rtol=1e-9, atol=1e-9 * b_norm):
+                failures.append(f"{name}: u is not A lambda - b")
+            law = r.exact_law
+            if not (law.relative_residual == pytest.approx(r.relative_residual, rel=1e-6, abs=1e-15)
+                    and law.b_norm == pytest.approx(b_norm, rel=1e-12)):
+                failures.append(f"{name}: exact_law {law} against relative residual {r.relative_residual}")
         if r.status == SolveStatus.unresolvable or not compare(pair):
             continue
-        # b alone: the same problem for the relative natural map, so the same verdict. A alone: the
-        # algorithm solves the same problem, but the natural map weighs lambda ~ b / A against u ~ b
-        # differently: where scale 1 is not converged, a (verified) converged is true too.
-        if which == "A" and r.status == SolveStatus.converged:
+        # b alone: the same problem for the relative natural map, so the same verdict. A (alone or with
+        # b): the algorithm solves the same problem, but the natural map weighs lambda ~ b / A against
+        # u ~ b differently: where scale 1 is not converged, a (verified) converged is true too.
+        if which != "b" and r.status == SolveStatus.converged:
             continue
         if r.status != ref.status:
             failures.append(f"{name}: {r.status} (scale 1: {ref.status}; {r.message})")
     return failures
 
 
-@pytest.mark.parametrize("which", ["A", "b"])
+@pytest.mark.parametrize("which", ["A", "b", "A and b"])
 @pytest.mark.parametrize("exponent", EXPONENTS)
 def test_verdict_at_every_power_of_two_scale(at_scale_one, which, exponent):
     A, b, mu = base_problem()
-    if which == "A":
+    if "A" in which:
         A = A * 2.0 ** exponent
-    else:
+    if "b" in which:
         b = b * 2.0 ** exponent
     # (penalty is solved as given, its K and h having units: only honesty is asked of it)
     assert not check(A, b, mu, which, at_scale_one, lambda pair: pair[0] != "penalty")
 
 
-@pytest.mark.parametrize("which", ["A", "b"])
+@pytest.mark.parametrize("which", ["A", "b", "A and b"])
 @pytest.mark.parametrize("scale", DECIMALS)
 def test_verdict_at_every_decimal_scale(at_scale_one, which, scale):
     A, b, mu = base_problem()
-    if which == "A":
+    if "A" in which:
         A = A * scale
-    else:
+    if "b" in which:
         b = b * scale
     assert not check(A, b, mu, which, at_scale_one, lambda pair: pair[0] == "exact")

@@ -189,3 +189,8 @@ def test_reset_solvers_gives_a_fresh_process_result(tmp_path):
     assert any("held factor" in st.outcome for st in own.solve(p2, s).stages)
     own.reset()
     assert outcome_of(own.solve(p2, s)) == fresh
+    formulation = stiction.Formulation("exact")
+    formulation.solve(p1, s)
+    assert any("held factor" in st.outcome for st in formulation.solve(p2, s).stages)
+    formulation.reset()
+    assert outcome_of(formulation.solve(p2, s)) == fresh

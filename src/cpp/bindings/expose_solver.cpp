@@ -266,7 +266,7 @@ void exposeSolver() {
     bp::class_<FormulationSettings> fs("FormulationSettings",
                                        "Parameters of the formulations (stiction formulations lists them).");
     checkedMember(fs, "exact_solver", &FormulationSettings::exact_solver, "exact: default | nsgs | admm | newton");
-    checkedMember(fs, "pyramid_facets", &FormulationSettings::pyramid_facets, "pyramid: facets per cone (>= 3)");
+    checkedMember(fs, "pyramid_facets", &FormulationSettings::pyramid_facets, "pyramid: facets per cone (3 .. MAX_FACETS = 1024)");
     checkedMember(fs, "pyramid_inscribed", &FormulationSettings::pyramid_inscribed,
                   "pyramid: corners on the cone (True) or facets tangent to it (False)");
     checkedMember(fs, "pyramid_max_fixed_point", &FormulationSettings::pyramid_max_fixed_point,

@@ -30,7 +30,8 @@ const std::vector<Entry>& registry() {
         "N-facet pyramid cones: the Stewart-Trinkle / Anitescu-Potra LCP as ProxQP QPs with a fixed point on "
         "the pyramid's De Saxce term",
         {"pyramid_facets = 4: facets per cone (3 .. 1024)",
-         "pyramid_inscribed = false: corners on the cone (true) or facets tangent to it (false)"}},
+         "pyramid_inscribed = false: corners on the cone (true) or facets tangent to it (false)",
+         "pyramid_max_fixed_point = 100: QP solves on the pyramid's De Saxce term at most (>= 1)"}},
        makePyramidFormulation},
       {{"penalty", "83-84",
         "spring-damper normal and friction, implicit Euler (Kikuuwe-Fujimoto); time stepping only",
