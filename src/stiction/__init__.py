@@ -26,6 +26,6 @@ from ._core import (  # noqa: F401
     solver_names,
 )
 from .formulations import formulation_infos, formulation_names  # noqa: F401
-from .solve import solve, spatial_problem  # noqa: F401
+from .solve import reset_solvers, solve, spatial_problem  # noqa: F401
 
 __version__ = "0.1.0"

@@ -173,6 +173,7 @@ class Formulation:
     @property
     def name(self) -> str: ...
 
+    def reset(self) -> None: ...
     def solve(self, problem: ContactProblem, settings: Any, guess: numpy.typing.ArrayLike | None = ..., h: Any = ..., position_error: Any = ...) -> SolverResult: ...
 
 class FormulationSettings:
@@ -383,6 +384,7 @@ class Solver:
     @property
     def name(self) -> str: ...
 
+    def reset(self) -> None: ...
     def solve(self, problem: ContactProblem, settings: SolverSettings, guess: numpy.typing.ArrayLike | None = ...) -> SolverResult: ...
 
 class SolverResult:
@@ -463,6 +465,7 @@ class SolverSettings:
     def __init__(self) -> None: ...
     admm_rho: float
     max_iterations: int
+    measure_exact_law: bool
     proxqp_facets: int
     proxqp_max_iterations: int
     proxqp_tolerance: float

@@ -19,6 +19,7 @@ from . import _core
 PARAMETERS = {
     "pyramid_facets": "pyramid",
     "pyramid_inscribed": "pyramid",
+    "pyramid_max_fixed_point": "pyramid",
     "penalty_stiffness": "penalty",
     "penalty_damping": "penalty",
 }
@@ -56,9 +57,15 @@ def settings_for(name: str, params: dict) -> "_core.FormulationSettings":
         owner = PARAMETERS[key]
         if owner != name:
             raise ValueError(f"{key} applies to the {owner} formulation, not to {name!r}")
-        if key == "pyramid_facets":
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral, np.integer)) or value < 3:
-                raise ValueError(f"pyramid_facets must be an integer >= 3, got {value!r}")
+        if key in ("pyramid_facets", "pyramid_max_fixed_point"):
+            low, high = (3, _core.MAX_FACETS) if key == "pyramid_facets" else (1, None)
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral, np.integer)):
+                raise TypeError(f"{key} must be an integer, got {type(value).__name__} {value!r}")
+            if value < low or (high is not None and value > high):
+                # (facets: an N-facet pyramid is within pi^2 / (2 N^2) of the cone, 4.7e-6 of mu at 1024,
+                # and each facet is a dense QP row per contact: more buy nothing and exhaust memory)
+                raise ValueError(f"{key} must be an integer " + (f">= {low}" if high is None else f"between {low} and {high}")
+                                 + f", got {value!r}")
             value = int(value)
         elif key == "pyramid_inscribed":
             if not isinstance(value, (bool, np.bool_)):

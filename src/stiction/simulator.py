@@ -107,7 +107,7 @@ OVERRIDES = {
     "warm_start": "start each step's solve from the previous step's impulses (default True; False: from zero)",
     "ode_tolerance": "adaptive mode: local error tolerance",
     "formulation": "how each step's problem is resolved (stiction.formulation_names(); default exact)",
-    "pyramid_facets": "pyramid formulation: facets per friction cone (>= 3, default 4)",
+    "pyramid_facets": "pyramid formulation: facets per friction cone (3 .. 1024, default 4)",
     "pyramid_inscribed": "pyramid formulation: corners on the cone (True) or facets tangent to it (False, default)",
     "penalty_stiffness": "penalty formulation: K in N/m per contact (default 1e5)",
     "penalty_damping": "penalty formulation: beta in s, damping K beta (default 1e-3)",

@@ -13,7 +13,8 @@ from ._core import (Constraint, ContactProblem, Formulation, Solver, SolverResul
 
 class _PerThread(threading.local):
     """Solver and Formulation objects hold workspaces and run with the GIL released: each thread
-    keeps its own, so stiction.solve may be called from several threads at once."""
+    keeps its own, so stiction.solve may be called from several threads at once. This is hidden
+    state (reset_solvers() drops it): see solve()'s docstring."""
 
     def __init__(self):
         self.solvers: dict[str, Solver] = {}
@@ -21,6 +22,21 @@ class _PerThread(threading.local):
 
 
 _cache = _PerThread()
+
+
+def reset_solvers() -> None:
+    """Drop the Solver and Formulation objects that :func:`solve` keeps for the calling thread.
+
+    What they keep between calls is the only state one solve passes to the next: their
+    workspaces, and the default solver's held sticking factor (the factorization of A + rho I of
+    an earlier call, tried first while A's diagonal stays within 1e-3 of it: a simulation's next
+    step; docs/solvers.md). It can change which stage converges and the last bits of the result.
+    After reset_solvers() the next solve on this thread gives what it gives in a fresh process.
+    (The verdict's cache lives for one solve only; settings are never cached by value that
+    matters: every call passes all of its settings.) Other threads keep theirs.
+    """
+    _cache.solvers.clear()
+    _cache.formulations.clear()
 
 
 def _type_name(x) -> str:
@@ -105,17 +121,26 @@ def solve(
     exact natural map at result.lam is within tol * ||b||; docs/solvers.md).
     warm_start: None (lambda = 0), "proxqp" (facetized-cone QP by ProxQP), or an
     array lambda_0 (e.g. the previous step's solution).
-    time_limit: seconds for the whole solve, every stage included (0: none).
-    The solver objects (and their workspaces) are reused across calls, one set per thread; the
-    solve runs with the GIL released, so threads solve in parallel.
+    time_limit: seconds for the whole solve, every stage included (0: none); every formulation
+    keeps it, Pinocchio's solvers by running in chunks of iterations.
+
+    Hidden state: the solver objects (and their workspaces) are reused across calls, one set per
+    thread (the solve runs with the GIL released, so threads solve in parallel). The default
+    solver keeps its sticking step's factor between calls and tries it first on the next problem
+    whose A has nearly the same diagonal, so a call may end differently (another stage, other last
+    bits) after an earlier call than in a fresh process. ``stiction.reset_solvers()`` drops this
+    thread's objects; a caller who wants the state in its own hands uses its own
+    ``stiction.Solver(name)`` / ``stiction.Formulation(name, settings)`` objects (each with
+    ``reset()``) instead of this function. Every setting is passed whole at every call: none is
+    remembered from an earlier one.
     Wrong kinds of argument raise TypeError, wrong values ValueError, naming the argument.
 
     formulation: "exact" (default; `solver` picks the algorithm) or ccp, nakaoka, pyramid, penalty,
     pinocchio-admm, pinocchio-pgs, pinocchio-admm-ccp (stiction.formulation_names()).
     Whatever the formulation, result.residual / converged / status judge lambda by the exact law;
     result.own_converged / own_residual / own_law are the formulation's own verdict.
-    formulation_parameters: pyramid_facets, pyramid_inscribed (pyramid), penalty_stiffness,
-    penalty_damping (penalty). h: the step the impulses span (penalty needs it: its springs have
+    formulation_parameters: pyramid_facets (3 .. 1024), pyramid_inscribed, pyramid_max_fixed_point
+    (pyramid), penalty_stiffness, penalty_damping (penalty). h: the step the impulses span (penalty needs it: its springs have
     units); position_error: Psi per row (penalty: the gaps, which u = A P - b contains as Psi / h).
     """
     if not isinstance(problem, ContactProblem):

@@ -31,10 +31,20 @@ namespace {
 /// Python handle on one formulation (formulation.hpp) and its reusable workspace.
 struct FormulationSolver {
   FormulationSolver(const std::string& name, const FormulationSettings& settings)
-      : impl(makeFormulation(name, settings)), formulation(name) {}
+      : impl(makeFormulation(name, settings)), formulation(name), settings(settings) {}
   std::unique_ptr<ContactSolver> impl;
   std::string formulation;
+  FormulationSettings settings;
   Eigen::VectorXd position_error, state;
+
+  /// A fresh formulation in place of this one: what it kept between solves (workspaces; the exact
+  /// formulation's default solver: its held sticking factor) is gone, as in a new process.
+  void reset() {
+    InUse busy(impl.get(), "this Formulation object");
+    impl = makeFormulation(formulation, settings);
+    position_error.resize(0);
+    state.resize(0);
+  }
 
   SolverResult solveWith(const bp::object& problem, const bp::object& settings, const bp::object& guess,
                          const bp::object& h, const bp::object& psi) {
@@ -89,6 +99,12 @@ bp::list formulationList() {
 struct Solver {
   explicit Solver(const std::string& name) : impl(makeSolver(name)) {}
   std::unique_ptr<ContactSolver> impl;
+
+  /// A fresh algorithm in place of this one (see FormulationSolver::reset).
+  void reset() {
+    InUse busy(impl.get(), "this Solver object");
+    impl = makeSolver(impl->name());
+  }
 
   SolverResult solveWith(const bp::object& problem, const bp::object& settings, const bp::object& guess) {
     const ContactProblem& p = toObject<ContactProblem>(problem, "Solver.solve: problem", "stiction.ContactProblem");
@@ -238,6 +254,8 @@ void exposeSolver() {
                 "ProxQP inner iterations per ProxQP run");
   checkedMember(settings, "admm_rho", &SolverSettings::admm_rho, "0: chosen from the spectrum of A");
   checkedMember(settings, "time_limit", &SolverSettings::time_limit, "seconds, 0 = none; covers every stage");
+  checkedMember(settings, "measure_exact_law", &SolverSettings::measure_exact_law,
+                "False: result.exact_law is not measured (its access raises); states are still classified");
 
   bp::class_<StageReport>("StageReport", "One stage of a solve: its name, iterations, seconds and outcome.",
                           bp::no_init)
@@ -289,7 +307,7 @@ void exposeSolver() {
     bp::class_<FormulationSettings> fs("FormulationSettings",
                                        "Parameters of the formulations (stiction formulations lists them).");
     checkedMember(fs, "exact_solver", &FormulationSettings::exact_solver, "exact: default | nsgs | admm | newton");
-    checkedMember(fs, "pyramid_facets", &FormulationSettings::pyramid_facets, "pyramid: facets per cone (>= 3)");
+    checkedMember(fs, "pyramid_facets", &FormulationSettings::pyramid_facets, "pyramid: facets per cone (3 .. MAX_FACETS = 1024)");
     checkedMember(fs, "pyramid_inscribed", &FormulationSettings::pyramid_inscribed,
                   "pyramid: corners on the cone (True) or facets tangent to it (False)");
     checkedMember(fs, "pyramid_max_fixed_point", &FormulationSettings::pyramid_max_fixed_point,
@@ -305,6 +323,10 @@ void exposeSolver() {
       .def("__init__", bp::make_constructor(&makeFormulationObject, bp::default_call_policies(),
                                             (bp::arg("name"), bp::arg("settings") = bp::object())))
       .add_property("name", &FormulationSolver::name)
+      .def("reset", &FormulationSolver::reset,
+           "Forget what this object kept between solves (workspaces; the exact formulation's default "
+           "solver: its held sticking factor): the next solve gives what a new object, or a new process, "
+           "gives.")
       .def("solve", &FormulationSolver::solveWith,
            (bp::arg("problem"), bp::arg("settings"), bp::arg("guess") = bp::object(), bp::arg("h") = 1.0,
             bp::arg("position_error") = bp::object()));
@@ -315,6 +337,10 @@ void exposeSolver() {
       "Solver", "One algorithm with its reusable workspace: 'default', 'nsgs', 'admm' or 'newton'.", bp::no_init)
       .def("__init__", bp::make_constructor(&makeSolverObject, bp::default_call_policies(), (bp::arg("name"))))
       .add_property("name", &Solver::name)
+      .def("reset", &Solver::reset,
+           "Forget what this object kept between solves (workspaces; 'default': the sticking step's held "
+           "factor, tried first on the next problem whose A's diagonal is close): the next solve gives what a "
+           "new Solver, or a new process, gives.")
       .def("solve", &Solver::solveWith,
            (bp::arg("problem"), bp::arg("settings"), bp::arg("guess") = bp::object()));
 
@@ -371,6 +397,8 @@ void exposeSolver() {
           "primal and dual feasibility, complementarity, Signorini, maximum dissipation and lift-off "
           "of sliding blocks.");
 
+  // The most facets of a facetized cone (proxqp_facets, pyramid_facets; solver.hpp says why).
+  bp::scope().attr("MAX_FACETS") = kMaxFacets;
   // The default's size bound for trying sparse Newton first (tests/test_default_rule.py).
   bp::scope().attr("DEFAULT_SPARSE_NEWTON_ENTRIES") = static_cast<long>(kSparseNewtonEntries);
   bp::def("_default_plan", &defaultPlanOf,

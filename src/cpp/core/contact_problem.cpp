@@ -12,6 +12,13 @@
 namespace stiction {
 
 namespace {
+/// ||b|| without its squares' under- or overflow (||b|| = 1e-200 read 0, 1e200 inf: the verdict
+/// then measured against 1 or infinity); Eigen's scaled norm only where the plain one is unsafe.
+double normOf(const Eigen::VectorXd& b) {
+  const double n = b.norm();
+  return n > 1e-150 && n < 1e150 ? n : b.stableNorm();
+}
+
 std::string fmt(double x) {
   std::ostringstream os;
   os << x;
@@ -22,7 +29,7 @@ std::string fmt(double x) {
 ContactProblem::ContactProblem(std::shared_ptr<const DelassusOperator> delassus, Eigen::VectorXd b,
                                std::vector<Constraint> constraints, double asymmetry_tolerance,
                                bool check_definiteness)
-    : delassus_(std::move(delassus)), b_(std::move(b)), b_norm_(b_.norm()), constraints_(std::move(constraints)) {
+    : delassus_(std::move(delassus)), b_(std::move(b)), b_norm_(normOf(b_)), constraints_(std::move(constraints)) {
   if (!delassus_) throw std::invalid_argument("ContactProblem: no Delassus operator given");
   const Eigen::Index m = delassus_->rows();
   if (b_.size() != m)
@@ -113,7 +120,7 @@ void ContactProblem::setB(const Eigen::Ref<const Eigen::VectorXd>& b) {
                                 " entries, got " + std::to_string(b.size()));
   if (!b.allFinite()) throw std::invalid_argument("ContactProblem.set_b: b has NaN or infinite entries");
   b_ = b;
-  b_norm_ = b_.norm();
+  b_norm_ = normOf(b_);
 }
 
 }  // namespace stiction

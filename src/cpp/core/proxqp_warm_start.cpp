@@ -4,8 +4,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 #include <proxsuite/proxqp/dense/dense.hpp>
+
+#include "stiction/proxqp_chunks.hpp"
 
 namespace stiction {
 
@@ -25,13 +29,18 @@ StageReport proxqpWarmStart(const ContactProblem& problem, const SolverSettings&
     report.outcome = "solved";
     return report;
   }
-  const int facets = std::max(3, settings.proxqp_facets);
+  if (settings.proxqp_facets < 3 || settings.proxqp_facets > kMaxFacets)  // (never clamped: a value that
+    // cannot take effect is an error)
+    throw std::invalid_argument("proxqp_facets must be between 3 and " + std::to_string(kMaxFacets) + ", got " +
+                                std::to_string(settings.proxqp_facets) + kMaxFacetsReason);
+  const int facets = settings.proxqp_facets;
   Eigen::Index n_in = 0;
   for (const Constraint& c : cons) {
     if (c.kind == ConstraintKind::kUnilateral) n_in += 1;
     if (c.kind == ConstraintKind::kPlanarFriction) n_in += 2;
     if (c.kind == ConstraintKind::kSpatialFriction) n_in += facets;
   }
+  checkDenseQpSize("ProxQP (proxqp_facets = " + std::to_string(facets) + ")", m, n_in);
   Eigen::MatrixXd C = Eigen::MatrixXd::Zero(n_in, m);
   Eigen::Index row = 0;
   const double shrink = std::cos(M_PI / facets);  // inscribed pyramid
@@ -77,48 +86,25 @@ StageReport proxqpWarmStart(const ContactProblem& problem, const SolverSettings&
   qp.settings.verbose = false;
   qp.init(H, g, proxsuite::nullopt, proxsuite::nullopt, C, lower, upper);
 
-  // Chunks of inner iterations: at most the iteration budget, and with a time limit
-  // at most half the remaining time at the cost per iteration measured so far (a
-  // first guess from the sizes: a few products with the m x (m + n_in) system).
+  // Chunks of inner iterations (proxqp_chunks.hpp): a first guess of the cost per iteration from
+  // the sizes (a few products with the m x (m + n_in) system), then measured.
   const long budget = std::max(1, settings.proxqp_max_iterations);
-  long used = 0;
-  double per_iteration = 4e-9 * static_cast<double>(m) * static_cast<double>(m + n_in) + 1e-7;
-  report.outcome = "iteration limit reached";
-  for (int call = 0;; ++call) {
-    long chunk = budget - used;
-    if (time_limit > 0.0) {
-      const double remaining = time_limit - elapsed();
-      chunk = std::min<long>(chunk, static_cast<long>(0.5 * remaining / per_iteration));
-      if (chunk < 1) {
-        report.outcome = "time limit reached";
-        break;
-      }
-    }
-    if (chunk < 1) break;
-    qp.settings.max_iter_in = std::min<long>(chunk, 1500);
-    qp.settings.max_iter = std::max<long>(1, chunk / qp.settings.max_iter_in);
-    if (call > 0) qp.settings.initial_guess = pq::InitialGuessStatus::WARM_START_WITH_PREVIOUS_RESULT;
-    const double t0 = elapsed();
-    qp.solve();
-    const long done = std::max<long>(1, static_cast<long>(qp.results.info.iter));
-    used += done;
-    per_iteration = (elapsed() - t0) / done;  // call overheads included: they are real
-    const auto status = qp.results.info.status;
-    if (status == pq::QPSolverOutput::PROXQP_SOLVED) {
-      report.outcome = "solved";
-      break;
-    }
-    if (status == pq::QPSolverOutput::PROXQP_DUAL_INFEASIBLE) {
-      // The QP is unbounded below: x is a ray with A x ~ 0, x in C_F, b'x > 0.
-      report.outcome = "unbounded (b pushes along a direction A does not resist)";
-      if (ray != nullptr && qp.results.x.allFinite()) *ray = qp.results.x;
-      break;
-    }
-    if (status != pq::QPSolverOutput::PROXQP_MAX_ITER_REACHED) {
-      report.outcome = "failed (ProxQP status " + std::to_string(static_cast<int>(status)) + ")";
-      break;
-    }
-    if (used >= budget) break;
+  const double per_iteration = 4e-9 * static_cast<double>(m) * static_cast<double>(m + n_in) + 1e-7;
+  const QpChunks run = solveQpInChunks(qp, budget, time_limit, start, per_iteration);
+  const long used = run.iterations;
+  const auto status = qp.results.info.status;
+  if (run.timed_out) {  // (the last chunk, if any, reached its iterations)
+    report.outcome = "time limit reached";
+  } else if (status == pq::QPSolverOutput::PROXQP_SOLVED) {
+    report.outcome = "solved";
+  } else if (status == pq::QPSolverOutput::PROXQP_DUAL_INFEASIBLE) {
+    // The QP is unbounded below: x is a ray with A x ~ 0, x in C_F, b'x > 0.
+    report.outcome = "unbounded (b pushes along a direction A does not resist)";
+    if (ray != nullptr && qp.results.x.allFinite()) *ray = qp.results.x;
+  } else if (status == pq::QPSolverOutput::PROXQP_MAX_ITER_REACHED || used == 0) {
+    report.outcome = "iteration limit reached";
+  } else {
+    report.outcome = "failed (ProxQP status " + std::to_string(static_cast<int>(status)) + ")";
   }
   report.iterations = static_cast<int>(std::min<long>(used, 2147483647L));
   lam = qp.results.x;

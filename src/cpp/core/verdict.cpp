@@ -182,11 +182,13 @@ void measureVerdictUncached(const ContactProblem& problem, const Eigen::Ref<cons
   const double chain = static_cast<double>(problem.delassus().productRoundingTerms());
   abs_product *= 1.0 + (chain + 2.0) * kEps;
   out.floor = floorOf(problem, lam, abs_product, per_block ? out.block_floor : block_floor);
+  const double underflow = std::sqrt(2.0 * static_cast<double>(m) * std::numeric_limits<double>::min());
   auto finish = [&](double map, double unit) {
     out.natural_map = map;
     double sq = 0.0;
     for (double e : block_bound) sq += e * e;
-    out.bound = std::sqrt(sq) + (static_cast<double>(m) + 2.0) * unit * map;  // + the norm's own accumulation
+    // + the norm's own accumulation, + squares that underflowed (each loses < DBL_MIN of the sum)
+    out.bound = std::sqrt(sq) + (static_cast<double>(m) + 2.0) * unit * map + underflow;
   };
   // 1. In double (vectorised; enough for a well-scaled problem): decisive when even
   //    its worst-case bound keeps it on one side of `decisive`.
@@ -340,7 +342,15 @@ InfeasibilityCertificate findInfeasibility(const ContactProblem& problem,
 }
 
 bool beyondPrecision(const ContactProblem& problem, double min_solution_norm) {
-  return min_solution_norm * kEps > kLooseTolerance * stoppingScale(problem);
+  if (!(min_solution_norm > 0.0)) return false;
+  if (std::isinf(min_solution_norm)) return true;
+  // lambda's natural scale is ||b|| / max diag A: a bound measured against it says the same at
+  // every magnitude of A (against ||b|| alone, A = 1e-50 I made every problem "infeasible").
+  thread_local Eigen::VectorXd diag;
+  diag.resize(problem.numRows());
+  problem.delassus().diagonal(diag);
+  const double max_diag = problem.numRows() > 0 ? diag.maxCoeff() : 0.0;
+  return min_solution_norm * kEps * (max_diag > 0.0 ? max_diag : 1.0) > kLooseTolerance * stoppingScale(problem);
 }
 
 StoppingTest::StoppingTest(const ContactProblem& problem, double tolerance)

@@ -29,8 +29,9 @@ const std::vector<Entry>& registry() {
       {{"pyramid", "§4.5 ([8, 50])",
         "N-facet pyramid cones: the Stewart-Trinkle / Anitescu-Potra LCP as ProxQP QPs with a fixed point on "
         "the pyramid's De Saxce term",
-        {"pyramid_facets = 4: facets per cone (>= 3)",
-         "pyramid_inscribed = false: corners on the cone (true) or facets tangent to it (false)"}},
+        {"pyramid_facets = 4: facets per cone (3 .. 1024)",
+         "pyramid_inscribed = false: corners on the cone (true) or facets tangent to it (false)",
+         "pyramid_max_fixed_point = 100: QP solves on the pyramid's De Saxce term at most (>= 1)"}},
        makePyramidFormulation},
       {{"penalty", "83-84",
         "spring-damper normal and friction, implicit Euler (Kikuuwe-Fujimoto); time stepping only",
@@ -50,10 +51,19 @@ const std::vector<Entry>& registry() {
 }  // namespace
 
 void checkFormulationSettings(const FormulationSettings& s) {
-  if (s.pyramid_facets < 3)
-    throw std::invalid_argument("pyramid_facets must be >= 3, got " + std::to_string(s.pyramid_facets));
+  // (The sizes that allocate: facets, bounded; pyramid_max_fixed_point counts QP solves and sizes
+  // nothing, so it has no upper bound: time_limit bounds its cost.)
+  if (s.pyramid_facets < 3 || s.pyramid_facets > kMaxFacets)
+    throw std::invalid_argument("pyramid_facets must be between 3 and " + std::to_string(kMaxFacets) + ", got " +
+                                std::to_string(s.pyramid_facets) + kMaxFacetsReason);
   if (s.pyramid_max_fixed_point < 1)
-    throw std::invalid_argument("pyramid_max_fixed_point must be >= 1");
+    throw std::invalid_argument("pyramid_max_fixed_point must be >= 1, got " +
+                                std::to_string(s.pyramid_max_fixed_point));
+  {
+    bool known = false;
+    for (const auto& n : solverNames()) known = known || n == s.exact_solver;
+    if (!known) makeSolver(s.exact_solver);  // throws, naming the known ones
+  }
   if (!(s.penalty_stiffness > 0.0) || !std::isfinite(s.penalty_stiffness))
     throw std::invalid_argument("penalty_stiffness (K) must be a positive finite number of N/m");
   if (!(s.penalty_damping >= 0.0) || !std::isfinite(s.penalty_damping))

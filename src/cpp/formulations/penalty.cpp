@@ -66,6 +66,9 @@ class PenaltyFormulation final : public Formulation {
  public:
   std::string name() const override { return "penalty"; }
   std::string equations() const override { return "83-84"; }
+  // K [N/m], beta [s], h and the gaps carry units: the problem scaled by powers of two would be
+  // another physical system, so it is solved as given (its verdict still judged at any scale).
+  bool rescalable() const override { return false; }
 
   void iterate(const ContactProblem& problem, const SolverSettings& settings, SolverResult& result) override {
     const auto& cons = problem.constraints();

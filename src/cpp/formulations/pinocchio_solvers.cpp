@@ -27,8 +27,9 @@
 //     on an 8 MiB stack; smaller thread stacks are checked too.
 //   - settings.tolerance sets Pinocchio's four tolerances (absolute and relative feasibility
 //     and complementarity), settings.max_iterations its iteration budget (Pinocchio's loop runs
-//     max_iterations + 1 times; it is given max_iterations - 1). settings.time_limit cannot
-//     interrupt Pinocchio's loop and is not applied.
+//     max_iterations + 1 times; it is given max_iterations - 1). settings.time_limit: Pinocchio's
+//     loop has no clock, so under a time limit it runs in chunks of iterations, each restarted from
+//     the last impulses (ADMM: and its last rho), sized from the measured cost to the time left.
 //   - Warm start: result.lam on entry when it is non-zero (setConstraintImpulseGuess).
 //   - A non-symmetric A (some FCLib files): ADMM's Cholesky reads its lower triangle, PGS
 //     works on (A + A^T) / 2 (baselines.py).
@@ -66,6 +67,7 @@
 #endif
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -364,54 +366,115 @@ class PinocchioFormulation final : public Formulation {
     g_ = -problem.b();
     const bool guess = (result.lam.array() != 0.0).any();
     const double tol = settings.tolerance;
-    const std::size_t budget = static_cast<std::size_t>(settings.max_iterations - 1);
 
-    bool converged = false;
+    // One call of Pinocchio's solve with at most `iterations` iterations (>= 1), from result.lam when
+    // `from_lam` (else from zero); returns the iterations it ran.
+    bool converged = false, before_loop = false;
     std::size_t count = 0;
     double primal = 0.0, dual = 0.0, complementarity = 0.0;
-    if (admm_) {
-      admm_settings_.max_iterations = budget;
-      admm_settings_.absolute_feasibility_tol = tol;
-      admm_settings_.relative_feasibility_tol = tol;
-      admm_settings_.absolute_complementarity_tol = tol;
-      admm_settings_.relative_complementarity_tol = tol;
-      admm_settings_.solve_ncp = ncp_;
-      admm_settings_.lanczos_size = static_cast<std::size_t>(std::min<Eigen::Index>(kAdmmLanczosSize, m));
-      if (guess)
-        admm_result_.setConstraintImpulseGuess(result.lam);
-      else
-        admm_result_.clearConstraintImpulseGuess();
-      admm_result_.clearConstraintVelocityGuess();
-      converged = admm_solver_.solve(delassus_, g_, models_, datas_, admm_settings_, admm_result_);
-      admm_result_.retrieveConstraintImpulses(result.lam);  // the projected iterate y
-      count = admm_result_.iterations;
-      primal = admm_result_.primal_feasibility;
-      dual = admm_result_.dual_feasibility;
-      complementarity = admm_result_.complementarity;
-    } else {
-      pgs_settings_.max_iterations = budget;
-      pgs_settings_.absolute_feasibility_tol = tol;
-      pgs_settings_.relative_feasibility_tol = tol;
-      pgs_settings_.absolute_complementarity_tol = tol;
-      pgs_settings_.relative_complementarity_tol = tol;
-      pgs_settings_.solve_ncp = ncp_;
-      if (guess)
-        pgs_result_.setConstraintImpulseGuess(result.lam);
-      else
-        pgs_result_.clearConstraintImpulseGuess();
-      converged = pgs_solver_.solve(delassus_, g_, models_, datas_, pgs_settings_, pgs_result_);
-      pgs_result_.retrieveConstraintImpulses(result.lam);
-      count = pgs_result_.iterations;
-      primal = pgs_result_.primal_feasibility;
-      dual = pgs_result_.dual_feasibility;
-      complementarity = pgs_result_.complementarity;
-    }
+    auto call = [&](std::size_t iterations, bool from_lam, bool warm_rho) -> std::size_t {
+      const std::size_t budget = iterations - 1;  // (its loop runs max_iterations + 1 times)
+      if (admm_) {
+        admm_settings_.max_iterations = budget;
+        admm_settings_.absolute_feasibility_tol = tol;
+        admm_settings_.relative_feasibility_tol = tol;
+        admm_settings_.absolute_complementarity_tol = tol;
+        admm_settings_.relative_complementarity_tol = tol;
+        admm_settings_.solve_ncp = ncp_;
+        admm_settings_.lanczos_size = static_cast<std::size_t>(std::min<Eigen::Index>(kAdmmLanczosSize, m));
+        admm_settings_.warmstart_rho_with_previous_result = warm_rho;
+        if (from_lam)
+          admm_result_.setConstraintImpulseGuess(result.lam);
+        else
+          admm_result_.clearConstraintImpulseGuess();
+        admm_result_.clearConstraintVelocityGuess();
+        converged = admm_solver_.solve(delassus_, g_, models_, datas_, admm_settings_, admm_result_);
+        admm_result_.retrieveConstraintImpulses(result.lam);  // the projected iterate y
+        count = admm_result_.iterations;
+        primal = admm_result_.primal_feasibility;
+        dual = admm_result_.dual_feasibility;
+        complementarity = admm_result_.complementarity;
+      } else {
+        pgs_settings_.max_iterations = budget;
+        pgs_settings_.absolute_feasibility_tol = tol;
+        pgs_settings_.relative_feasibility_tol = tol;
+        pgs_settings_.absolute_complementarity_tol = tol;
+        pgs_settings_.relative_complementarity_tol = tol;
+        pgs_settings_.solve_ncp = ncp_;
+        if (from_lam)
+          pgs_result_.setConstraintImpulseGuess(result.lam);
+        else
+          pgs_result_.clearConstraintImpulseGuess();
+        converged = pgs_solver_.solve(delassus_, g_, models_, datas_, pgs_settings_, pgs_result_);
+        pgs_result_.retrieveConstraintImpulses(result.lam);
+        count = pgs_result_.iterations;
+        primal = pgs_result_.primal_feasibility;
+        dual = pgs_result_.dual_feasibility;
+        complementarity = pgs_result_.complementarity;
+      }
+      // Pinocchio's `iterations` is the index of the iteration that stopped (0-based) when it
+      // converged, the number run otherwise; ADMM stops before its loop, with 0 iterations run,
+      // when the guess already passes its (unscaled) test: then it factorized the Delassus once.
+      before_loop = admm_ && converged && admm_result_.delassus_decomposition_update_count == 1;
+      return converged ? (before_loop ? 0 : count + 1) : count;
+    };
 
-    // Pinocchio's `iterations` is the index of the iteration that stopped (0-based) when it
-    // converged, the number run otherwise; ADMM stops before its loop, with 0 iterations run,
-    // when the guess already passes its (unscaled) test: then it factorized the Delassus once.
-    const bool before_loop = admm_ && converged && admm_result_.delassus_decomposition_update_count == 1;
-    result.iterations = static_cast<int>(converged ? (before_loop ? 0 : count + 1) : count);
+    // Pinocchio's loops have no clock. Without a time limit: one call with the whole budget. With
+    // one: the same single call when a guess of its cost (a product or two triangular solves with A
+    // per iteration, ADMM's factorization and Lanczos estimate per call) fits a tenth of the time;
+    // otherwise chunks of iterations, each restarted from the last impulses (ADMM: and its last rho).
+    // A first chunk of one iteration measures a call's own cost (set-up included: ADMM factorizes
+    // A at every call), a second one sized from the guess measures an iteration's; the next ones
+    // take half the time left at those costs, and none starts once that fits no iteration.
+    const std::size_t total_budget = static_cast<std::size_t>(settings.max_iterations);
+    std::size_t ran = 0;
+    int chunks = 0;
+    bool timed_out = false;
+    if (settings.time_limit <= 0.0) {
+      ran = call(total_budget, guess, false);
+      chunks = 1;
+    } else {
+      const auto start = FastClock::now();
+      auto since = [&]() { return std::chrono::duration<double>(FastClock::now() - start).count(); };
+      const double rows = static_cast<double>(m);
+      const double per_iteration_guess = 4e-9 * rows * rows + 1e-7;
+      const double set_up_guess =
+          admm_ ? 1e-9 * rows * rows * rows / 3.0 + 4e-9 * kAdmmLanczosSize * rows * rows : 2e-9 * rows * rows;
+      double overhead = 0.0, per_iteration = per_iteration_guess;
+      std::size_t last_chunk = 1;
+      for (;;) {
+        const double left = settings.time_limit - since();
+        const std::size_t rest = total_budget - ran;
+        double fits;
+        if (chunks == 0)
+          fits = set_up_guess + static_cast<double>(rest) * per_iteration_guess <= 0.1 * left ? static_cast<double>(rest)
+                                                                                               : 1.0;
+        else if (chunks == 1)
+          fits = std::max(1.0, (0.25 * left - overhead) / per_iteration_guess);
+        else
+          fits = (0.5 * left - overhead) / per_iteration;
+        if (left <= 0.0 || fits < 1.0) {
+          timed_out = true;
+          break;
+        }
+        // (at most 8 times the last chunk: a cost measured low by noise cannot buy a run-away chunk)
+        const double most = chunks == 0 ? fits : 8.0 * static_cast<double>(std::max<std::size_t>(1, last_chunk));
+        const std::size_t chunk = std::min(rest, static_cast<std::size_t>(std::min({fits, most, 1e15})));
+        last_chunk = chunk;
+        const double t0 = since();
+        const std::size_t done = call(chunk, chunks == 0 ? guess : true, chunks > 0);
+        const double took = since() - t0;
+        ++chunks;
+        ran += done;
+        if (converged || ran >= total_budget || !result.lam.allFinite()) break;
+        if (chunks == 1)
+          overhead = took;  // one iteration and the call's set-up
+        else  // (a call costs about overhead + done x per_iteration; with margins for noise)
+          per_iteration = std::max({1e-9, (took - 0.9 * overhead) / static_cast<double>(std::max<std::size_t>(1, done)),
+                                    0.25 * took / static_cast<double>(std::max<std::size_t>(1, done))});
+      }
+    }
+    result.iterations = static_cast<int>(std::min<std::size_t>(ran, 2147483647u));
 
     // What its stopping test measured (all four tolerances are `tol`, see own_law).
     double kkt = 0.0, step = std::numeric_limits<double>::infinity();
@@ -459,7 +522,13 @@ class PinocchioFormulation final : public Formulation {
         msg.append(")");
       }
     } else {
-      msg.append("iteration limit reached (").append(solverName()).append(", KKT ");
+      msg.append(timed_out ? "time limit reached (" : "iteration limit reached (").append(solverName());
+      if (chunks > 1) {
+        msg.append(", ");
+        appendNumber(msg, chunks);
+        msg.append(" chunks");
+      }
+      msg.append(", KKT ");
       appendNumber(msg, kkt);
       msg.append(", step ");
       appendNumber(msg, step);

@@ -29,6 +29,8 @@
 
 #include <proxsuite/proxqp/dense/dense.hpp>
 
+#include "stiction/proxqp_chunks.hpp"
+
 #include "stiction/clock.hpp"
 #include "stiction/cone.hpp"
 #include "stiction/verdict.hpp"
@@ -117,6 +119,7 @@ class PyramidFormulation final : public Formulation {
       if (c.kind == ConstraintKind::kPlanarFriction) n_in += 3;
       if (c.kind == ConstraintKind::kSpatialFriction) n_in += N + 1;
     }
+    checkDenseQpSize("pyramid (pyramid_facets = " + std::to_string(N) + ")", m, n_in);
     C_.setZero(n_in, m);
     Eigen::Index row = 0;
     for (std::size_t i = 0; i < cons.size(); ++i) {
@@ -161,22 +164,27 @@ class PyramidFormulation final : public Formulation {
     qp.settings.verbose = false;
     // At most proxqp_max_iterations inner iterations per QP: ProxQP's own budget is
     // max_iter (outer) x max_iter_in (inner, 1500 by default) -- left as max_iter alone it
-    // allowed 30 million, measured: 98 s on one 12-variable QP (8 facets).
+    // allowed 30 million, measured: 98 s on one 12-variable QP (8 facets). Each QP runs in chunks
+    // that keep the time limit (proxqp_chunks.hpp; ProxQP has no clock of its own).
     const long budget = std::max(1, settings.proxqp_max_iterations);
-    qp.settings.max_iter_in = std::min<long>(budget, 1500);
-    qp.settings.max_iter = std::max<long>(1, budget / qp.settings.max_iter_in);
+    double per_iteration = 4e-9 * static_cast<double>(m) * static_cast<double>(m + n_in) + 1e-7;
     qp.init(H_, g_, proxsuite::nullopt, proxsuite::nullopt, C_, lower_, upper_);
-    // Warm start from the caller's lambda (the previous step) when there is one.
-    // (No warm start from the previous step's lambda: without its multipliers ProxQP started
-    // from it converged worse than cold, measured on a pushed cube with 8 facets.)
-    qp.solve();
-    int qp_iterations = static_cast<int>(qp.results.info.iter);
+    // (No warm start from the caller's lambda, the previous step's: without its multipliers ProxQP
+    // started from it converged worse than cold, measured on a pushed cube with 8 facets.)
+    QpChunks chunks = solveQpInChunks(qp, budget, settings.time_limit, start, per_iteration);
+    long qp_iterations = chunks.iterations;
     result.own_converged = false;
     result.message = "fixed point on the De Saxce term did not settle";
     int outer = 1;
     u_.resize(m);
     s_new_.resize(m);
+    bool out_of_time = false;
     for (;; ++outer) {
+      if (chunks.timed_out) {
+        out_of_time = true;
+        result.message = "time limit reached";
+        break;
+      }
       if (qp.results.info.status != pq::QPSolverOutput::PROXQP_SOLVED) {
         result.message = qp.results.info.status == pq::QPSolverOutput::PROXQP_DUAL_INFEASIBLE
                              ? "the pyramid QP is unbounded (b pushes along a direction A does not resist)"
@@ -218,6 +226,7 @@ class PyramidFormulation final : public Formulation {
       }
       if (settings.time_limit > 0.0 &&
           std::chrono::duration<double>(Clock::now() - start).count() > settings.time_limit) {
+        out_of_time = true;
         result.message = "time limit reached";
         break;
       }
@@ -225,8 +234,8 @@ class PyramidFormulation final : public Formulation {
       qp.settings.initial_guess = pq::InitialGuessStatus::WARM_START_WITH_PREVIOUS_RESULT;
       qp.update(proxsuite::nullopt, g_, proxsuite::nullopt, proxsuite::nullopt, proxsuite::nullopt,
                 proxsuite::nullopt, proxsuite::nullopt);
-      qp.solve();
-      qp_iterations += static_cast<int>(qp.results.info.iter);
+      chunks = solveQpInChunks(qp, budget, settings.time_limit, start, per_iteration);
+      qp_iterations += chunks.iterations;
     }
     result.lam = qp.results.x;
     if (!result.lam.allFinite()) {
@@ -234,16 +243,20 @@ class PyramidFormulation final : public Formulation {
       result.own_converged = false;
     }
     result.iterations = outer;
-    result.stages.push_back({"proxqp (pyramid QPs)", qp_iterations,
+    result.stages.push_back({"proxqp (pyramid QPs)", static_cast<int>(std::min<long>(qp_iterations, 2147483647L)),
                              std::chrono::duration<double>(Clock::now() - start).count(), result.message});
-    if (!result.own_converged && qp.results.info.status != pq::QPSolverOutput::PROXQP_DUAL_INFEASIBLE) {
+    if (!result.own_converged && !out_of_time &&
+        qp.results.info.status != pq::QPSolverOutput::PROXQP_DUAL_INFEASIBLE) {
       // ProxQP misses tight tolerances on some of these QPs (A only semi-definite, a degenerate
       // apex; measured: a third of a pushed cube's steps with 8 facets at 1e-10): finish with ADMM
       // on the same LCP, projecting exactly onto the pyramids, from ProxQP's iterate.
       const auto t0 = Clock::now();
       const Pyramid shape{N, facet_mu, corner_radius};
-      const int its = admm(problem, A, shape, settings, result.lam, result.own_residual, result.own_converged);
-      const std::string outcome = result.own_converged ? "converged" : "iteration limit reached";
+      bool timed_out = false;
+      const int its = admm(problem, A, shape, settings, start, result.lam, result.own_residual, result.own_converged,
+                           timed_out);
+      const std::string outcome =
+          result.own_converged ? "converged" : timed_out ? "time limit reached" : "iteration limit reached";
       result.message = result.own_converged ? "converged (ADMM after ProxQP)" : "ProxQP then ADMM: " + outcome;
       result.iterations += its;
       result.stages.push_back({"admm (pyramid projection)", its,
@@ -255,8 +268,10 @@ class PyramidFormulation final : public Formulation {
   // ADMM on the pyramid LCP: (A + rho I) x = b - E s + rho z - y, z = P_pyramid(x + y / rho),
   // y += rho (x - z), s = s_P(A x - b) refreshed from the unconstrained iterate (as the exact
   // ADMM does with the cone). Stops on ||lambda - P(lambda - w)|| <= tol ||b||, w = u + E s_P(u).
+  // With settings.time_limit, stops (timed_out) once that many seconds have passed since `start`.
   int admm(const ContactProblem& problem, const Eigen::MatrixXd& A, const Pyramid& shape,
-           const SolverSettings& settings, Eigen::VectorXd& lam, double& residual, bool& converged) {
+           const SolverSettings& settings, FastClock::time_point start, Eigen::VectorXd& lam, double& residual,
+           bool& converged, bool& timed_out) {
     const auto& cons = problem.constraints();
     const auto& off = problem.offsets();
     const Eigen::Index m = problem.numRows();
@@ -318,6 +333,12 @@ class PyramidFormulation final : public Formulation {
       residual = (z - w).norm() / scale;
       if (residual <= settings.tolerance) {
         converged = true;
+        ++it;
+        break;
+      }
+      if (settings.time_limit > 0.0 &&
+          std::chrono::duration<double>(FastClock::now() - start).count() > settings.time_limit) {
+        timed_out = true;
         ++it;
         break;
       }

@@ -33,7 +33,7 @@ namespace stiction {
 /// Parameters of the formulations that have some (defaults = `stiction formulations`).
 struct FormulationSettings {
   std::string exact_solver = "default";  ///< exact: which solver of solver.hpp
-  int pyramid_facets = 4;                ///< pyramid: N facets per spatial cone (>= 3)
+  int pyramid_facets = 4;                ///< pyramid: N facets per spatial cone (3 .. kMaxFacets, solver.hpp)
   bool pyramid_inscribed = false;        ///< pyramid: vertices on the cone (true) or facets tangent to it
   int pyramid_max_fixed_point = 100;     ///< pyramid: outer iterations on the pyramid's De Saxce term
   double penalty_stiffness = 1e5;        ///< penalty: K, N/m per contact (normal and tangential)

@@ -20,11 +20,20 @@ enum class WarmStart {
   kProxQP = 2,  ///< start from ProxQP's solution of the facetized-cone QP
 };
 
+/// The most facets of a facetized cone (SolverSettings::proxqp_facets, FormulationSettings::pyramid_facets).
+/// An N-facet pyramid misses the cone by 1/cos(pi/N) - 1 ~ pi^2 / (2 N^2) of mu: 4.7e-6 at 1024, finer
+/// than any friction coefficient is known, so more facets buy nothing, while each costs a dense
+/// inequality row per contact in ProxQP's QP (whose workspace grows as the square of the rows).
+constexpr int kMaxFacets = 1024;
+constexpr const char* kMaxFacetsReason =
+    " (an N-facet pyramid is within pi^2/(2 N^2) of the cone: 4.7e-6 of mu at 1024; each facet is a dense QP row "
+    "per contact)";
+
 struct SolverSettings {
   double tolerance = 1e-10;   ///< on relative_residual + residual_bound (verdict.hpp)
   int max_iterations = 2000;  ///< sweeps (NSGS) / iterations (ADMM, Newton)
   WarmStart warm_start = WarmStart::kNone;
-  int proxqp_facets = 8;       ///< edges of the pyramid that replaces each spatial cone
+  int proxqp_facets = 8;       ///< edges of the pyramid that replaces each spatial cone (3 .. kMaxFacets)
   double proxqp_tolerance = 1e-8;  ///< relative (eps_rel), scaled to b and lambda (eps_abs)
   int proxqp_max_iterations = 20000;  ///< ProxQP's inner iterations in all, per ProxQP run
   double admm_rho = 0.0;       ///< 0: chosen from the spectrum of A
@@ -93,6 +102,10 @@ class ContactSolver {
   /// verdict (infeasibility certificates included). Other formulations (formulation.hpp)
   /// set result.own_converged / own_residual themselves.
   virtual bool exactLaw() const { return true; }
+  /// True when the driver may run iterate() on the problem scaled by powers of two (A 2^-a,
+  /// b 2^-c, lambda 2^(a-c)) where its magnitudes are extreme (docs/solvers.md, "Scale"): every
+  /// algorithm whose parameters carry no units. (penalty: its stiffness K does, so no.)
+  virtual bool rescalable() const { return true; }
 
   /// Iterate from result.lam (already sized and set to the initial guess) until
   /// the StoppingTest passes or the budget (iterations, settings.time_limit) is
@@ -106,6 +119,10 @@ class ContactSolver {
 /// "nsgs", "admm", "newton" or "default" (NSGS, then Newton if NSGS stalls).
 std::unique_ptr<ContactSolver> makeSolver(const std::string& name);
 std::vector<std::string> solverNames();
+
+/// Throws std::invalid_argument naming the first setting out of its range (every field is checked;
+/// max_iterations and proxqp_max_iterations size no memory, so they have no upper bound).
+void validateSettings(const SolverSettings& settings);
 
 /// The driver: infeasibility pre-check, warm start, iterate, then the common verdict
 /// (u, residual and its rounding bound, states, status, seconds; verdict.hpp).

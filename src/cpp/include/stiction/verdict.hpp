@@ -44,7 +44,7 @@
 // ||lambda|| < b'd / ||A^T d||. A normal row with A_nn = 0 (a contact on something
 // that cannot move) and b_n > 0 gives d = e_n and no solution at all. The
 // problem is declared infeasible when this bound exceeds what double
-// precision can resolve even loosely, ||lambda|| eps > 1e-6 ||b||.
+// precision can resolve even loosely at the problem's scale, ||lambda|| eps max diag A > 1e-6 ||b||.
 #pragma once
 
 #include <string>
@@ -101,9 +101,12 @@ void measureVerdict(const ContactProblem& problem, const Eigen::Ref<const Eigen:
 bool lastVerdictResidual(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
                          Eigen::VectorXd& u);
 
-/// measureVerdict remembers its last answer (the stopping test and the driver often judge
-/// the same lambda); the driver forgets it at the start of every solve, as A and b may
-/// have changed in place since (the simulator updates them per step).
+/// measureVerdict remembers its last answer in a thread-local cache keyed on the problem's address
+/// and lambda (the stopping test and the driver often judge the same lambda). It lives for one
+/// solve: the driver forgets it at the start (A and b may have changed in place since, as the
+/// simulator updates them per step) and at the end of every solve (the problems it keyed on may
+/// be gone, and a new one at the same address must not meet its answers). A caller of
+/// measureVerdict outside solve() calls this after changing A or b in place.
 void forgetVerdicts();
 
 /// Just the floor (one product with |A|), for algorithms deciding whether to go on.
@@ -126,8 +129,9 @@ InfeasibilityCertificate findInfeasibility(const ContactProblem& problem,
 /// so that an unreachable 1e-300 does not make a problem infeasible).
 constexpr double kLooseTolerance = 1e-6;
 
-/// True when every solution would be too large to verify: min_solution_norm * eps >
-/// kLooseTolerance * stoppingScale.
+/// True when every solution would be too large to verify at the problem's own scale:
+/// min_solution_norm * eps * max diag A > kLooseTolerance * stoppingScale (||lambda|| against
+/// ||b|| / max diag A, lambda's natural size, so the test reads the same whatever A's magnitude).
 bool beyondPrecision(const ContactProblem& problem, double min_solution_norm);
 
 /// The stopping test every algorithm shares. The cheap double natural map first; the
