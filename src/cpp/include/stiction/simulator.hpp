@@ -18,15 +18,12 @@
 // sized once: a step allocates only when the number of active contacts changes.
 #pragma once
 
-#include <array>
-
 #include <memory>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include <Eigen/SparseCore>
-#include <pinocchio/multibody/data.hpp>
 #include <pinocchio/multibody/geometry.hpp>
 #include <pinocchio/multibody/model.hpp>
 
