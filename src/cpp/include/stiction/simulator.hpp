@@ -231,7 +231,7 @@ struct StepTimings {
   double total = 0.0;
 };
 
-/// The last contact problem and step, for inspection (Python's sim.data.A, .b, .lambda, ...) and
+/// The last contact problem and step, for inspection (Python's sim.data.A, .b, .candidate_lambda, ...) and
 /// for the next step. Written by the stages of step() / buildContactProblem / contactsAtState
 /// (src/cpp/sim/), read by the bindings, the rollout recorder and a C++ user; valid until the next
 /// step overwrites it. Sized once by SimulatorData's constructor (per candidate, per anchor) or
@@ -243,8 +243,9 @@ struct SimulatorOutputs {
   /// J (rows x nv) is held by columns of parts (the workspace's); denseJacobian() assembles it.
   Eigen::Index rows = 0;
   Eigen::MatrixXd A;                 ///< rows x rows, J M^-1 J^T (eq. 22), when dense
-  /// The same when sparse (many parts, > 96 rows). Its values may have been swapped into the
-  /// workspace's sparse Delassus operator: denseDelassus() reads whichever holds them.
+  /// The same when sparse (many parts, > 96 rows). After a solve it may hold the previous step's
+  /// values (this step's were swapped into the workspace's Delassus operator, no copy): read A
+  /// through denseDelassus(), which takes them from wherever they are.
   Eigen::SparseMatrix<double> A_sparse;
   bool sparse = false;               ///< which of A, A_sparse holds the last problem's operator
   Eigen::VectorXd b;                 ///< eq. 27 at force level
