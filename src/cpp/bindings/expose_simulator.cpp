@@ -7,6 +7,7 @@
 #include <cstring>
 #include <sstream>
 
+#include "../sim/workspace.hpp"
 #include "convert.hpp"
 #include "expose.hpp"
 #include "stiction/rk4_stability.hpp"
@@ -162,45 +163,45 @@ void set_t(SimulatorData& d, const bp::object& x) {
 
 NdArray get_J(const SimulatorData& d) { return readOnlyCopy(denseJacobian(d)); }
 NdArray get_A(const SimulatorData& d) { return readOnlyCopy(denseDelassus(d)); }
-NdArray get_b(const SimulatorData& d) { return readOnlyCopy(d.b); }
-NdArray get_drift(const SimulatorData& d) { return readOnlyCopy(d.drift); }
-NdArray get_position_error(const SimulatorData& d) { return readOnlyCopy(d.position_error); }
-NdArray get_gaps(const SimulatorData& d) { return readOnlyCopy(d.gaps); }
+NdArray get_b(const SimulatorData& d) { return readOnlyCopy(d.out.b); }
+NdArray get_drift(const SimulatorData& d) { return readOnlyCopy(d.out.drift); }
+NdArray get_position_error(const SimulatorData& d) { return readOnlyCopy(d.out.position_error); }
+NdArray get_gaps(const SimulatorData& d) { return readOnlyCopy(d.out.gaps); }
 NdArray get_M(const SimulatorData& d) { return readOnlyCopy(denseMassMatrix(d)); }  // symmetric
-NdArray get_tau(const SimulatorData& d) { return readOnlyCopy(d.tau); }
-NdArray get_nle(const SimulatorData& d) { return readOnlyCopy(d.nle); }
-NdArray get_candidate_lambda(const SimulatorData& d) { return readOnlyCopy(d.candidate_lambda); }
-NdArray get_anchor_lambda(const SimulatorData& d) { return readOnlyCopy(d.anchor_lambda); }
-NdArray get_candidate_velocity(const SimulatorData& d) { return readOnlyCopy(d.candidate_velocity); }
-NdArray get_pair_points(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.slot_point)); }
-NdArray get_pair_normals(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.slot_normal)); }
-NdArray get_pair_t1(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.slot_t1)); }
-NdArray get_pair_t2(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.slot_t2)); }
+NdArray get_tau(const SimulatorData& d) { return readOnlyCopy(d.out.tau); }
+NdArray get_nle(const SimulatorData& d) { return readOnlyCopy(d.out.nle); }
+NdArray get_candidate_lambda(const SimulatorData& d) { return readOnlyCopy(d.out.candidate_lambda); }
+NdArray get_anchor_lambda(const SimulatorData& d) { return readOnlyCopy(d.out.anchor_lambda); }
+NdArray get_candidate_velocity(const SimulatorData& d) { return readOnlyCopy(d.out.candidate_velocity); }
+NdArray get_pair_points(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.slot_point)); }
+NdArray get_pair_normals(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.slot_normal)); }
+NdArray get_pair_t1(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.slot_t1)); }
+NdArray get_pair_t2(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.slot_t2)); }
 // The last solve's result; its exact-law measures taken here (the step leaves them to whoever asks:
-// a robot's step spent ~4 % of its time on them), of the problem it solved, still in d.problem.
+// a robot's step spent ~4 % of its time on them), of the problem it solved, still in d.work->problem.
 SolverResult get_result(const SimulatorData& d) {
-  SolverResult r = d.result;
-  if (!r.exact_law_measured && d.problem && r.lam.size() == d.problem->numRows() && r.u.size() == r.lam.size()) {
-    measureExactLaw(*d.problem, r.lam, r.exact_law, kRelativeSpeedFloor, &r.u);
+  SolverResult r = d.out.result;
+  if (!r.exact_law_measured && d.work->problem && r.lam.size() == d.work->problem->numRows() && r.u.size() == r.lam.size()) {
+    measureExactLaw(*d.work->problem, r.lam, r.exact_law, kRelativeSpeedFloor, &r.u);
     r.exact_law_measured = true;
   }
   return r;
 }
 NdArray get_candidate_rows(const SimulatorData& d) {
   return readOnlyCopy(Eigen::VectorXi(
-      Eigen::Map<const Eigen::VectorXi>(d.candidate_rows.data(), static_cast<Eigen::Index>(d.candidate_rows.size()))));
+      Eigen::Map<const Eigen::VectorXi>(d.out.candidate_rows.data(), static_cast<Eigen::Index>(d.out.candidate_rows.size()))));
 }
 // Snapshots of the last step, immutable so that a write raises instead of being lost: tuples, and
 // a read-only mapping for the timings.
-bp::tuple get_active(const SimulatorData& d) { return bp::tuple(pyList(d.active)); }
-bp::tuple get_states(const SimulatorData& d) { return bp::tuple(pyList(d.candidate_states)); }
+bp::tuple get_active(const SimulatorData& d) { return bp::tuple(pyList(d.out.active)); }
+bp::tuple get_states(const SimulatorData& d) { return bp::tuple(pyList(d.out.candidate_states)); }
 ReadOnlyMapping get_timings(const SimulatorData& d) {
   bp::dict out;
-  out["kinematics"] = d.timings.kinematics;
-  out["delassus"] = d.timings.delassus;
-  out["solve"] = d.timings.solve;
-  out["integrate"] = d.timings.integrate;
-  out["total"] = d.timings.total;
+  out["kinematics"] = d.out.timings.kinematics;
+  out["delassus"] = d.out.timings.delassus;
+  out["solve"] = d.out.timings.solve;
+  out["integrate"] = d.out.timings.integrate;
+  out["total"] = d.out.timings.total;
   return readOnlyMapping(out);
 }
 
@@ -513,14 +514,14 @@ void exposeSimulator() {
       .add_property("timings", &get_timings,
                     "the last step's phase times in microseconds: kinematics, delassus, solve, integrate, "
                     "total (a read-only mapping)")
-      .def_readonly("rhs_evaluations", &SimulatorData::rhs_evaluations)
-      .def_readonly("last_dt", &SimulatorData::last_dt)
-      .def_readonly("iterations_step", &SimulatorData::iterations_step)
-      .def_readonly("max_residual_step", &SimulatorData::max_residual_step)
-      .def_readonly("all_converged_step", &SimulatorData::all_converged_step)
-      .def_readonly("sparse", &SimulatorData::sparse,
+      .add_property("rhs_evaluations", +[](const SimulatorData& d) { return d.out.rhs_evaluations; })
+      .add_property("last_dt", +[](const SimulatorData& d) { return d.out.last_dt; })
+      .add_property("iterations_step", +[](const SimulatorData& d) { return d.out.iterations_step; })
+      .add_property("max_residual_step", +[](const SimulatorData& d) { return d.out.max_residual_step; })
+      .add_property("all_converged_step", +[](const SimulatorData& d) { return d.out.all_converged_step; })
+      .add_property("sparse", +[](const SimulatorData& d) { return d.out.sparse; },
                     "True when the last problem's Delassus operator was assembled sparse (many parts, > 96 rows)")
-      .add_property("parts", +[](const SimulatorData& d) { return static_cast<long>(d.parts.size()); },
+      .add_property("parts", +[](const SimulatorData& d) { return static_cast<long>(d.work->parts.size()); },
                     "the number of parts of the world (subtrees of the universe, each its own Model and Data)");
   bp::def(
       "rk4_stable_step",

@@ -53,27 +53,27 @@ int spreadVertices(const coal::ContactPatch& patch, int wanted, std::array<int, 
 
 void detectContacts(const SimulatorModel& sim, SimulatorData& sd) {
   const pinocchio::Model& model = sim.model;
-  sd.active.clear();
-  std::fill(sd.candidate_rows.begin(), sd.candidate_rows.end(), 0);
+  sd.out.active.clear();
+  std::fill(sd.out.candidate_rows.begin(), sd.out.candidate_rows.end(), 0);
   // Half-spaces in world coordinates (a body's face moves with its frame).
-  sd.plane_normal.resize(3, sim.halfspaces.size());
-  sd.plane_t1.resize(3, sim.halfspaces.size());
-  sd.plane_t2.resize(3, sim.halfspaces.size());
-  sd.plane_offset.resize(sim.halfspaces.size());
+  sd.work->plane_normal.resize(3, sim.halfspaces.size());
+  sd.work->plane_t1.resize(3, sim.halfspaces.size());
+  sd.work->plane_t2.resize(3, sim.halfspaces.size());
+  sd.work->plane_offset.resize(sim.halfspaces.size());
   for (std::size_t k = 0; k < sim.halfspaces.size(); ++k) {
     const HalfSpace& h = sim.halfspaces[k];
     if (h.frame == 0) {
-      sd.plane_normal.col(k) = h.normal;
-      sd.plane_t1.col(k) = h.tangent1;
-      sd.plane_t2.col(k) = h.tangent2;
-      sd.plane_offset[k] = h.offset;
+      sd.work->plane_normal.col(k) = h.normal;
+      sd.work->plane_t1.col(k) = h.tangent1;
+      sd.work->plane_t2.col(k) = h.tangent2;
+      sd.work->plane_offset[k] = h.offset;
     } else {
       const pinocchio::Frame& f = model.frames[h.frame];
       const pinocchio::SE3 oMf = jointPlacement(sim, sd, f.parentJoint) * f.placement;
-      sd.plane_normal.col(k) = oMf.rotation() * h.normal;
-      sd.plane_t1.col(k) = oMf.rotation() * h.tangent1;
-      sd.plane_t2.col(k) = oMf.rotation() * h.tangent2;
-      sd.plane_offset[k] = h.offset + sd.plane_normal.col(k).dot(oMf.translation());
+      sd.work->plane_normal.col(k) = oMf.rotation() * h.normal;
+      sd.work->plane_t1.col(k) = oMf.rotation() * h.tangent1;
+      sd.work->plane_t2.col(k) = oMf.rotation() * h.tangent2;
+      sd.work->plane_offset[k] = h.offset + sd.work->plane_normal.col(k).dot(oMf.translation());
     }
   }
   // Sphere (or point) against half-space, analytic.
@@ -94,14 +94,14 @@ void detectContacts(const SimulatorModel& sim, SimulatorData& sd) {
       const Eigen::Vector3d relative =
           (oMj.translation() - oMface_joint.translation()) + oMj.rotation() * f.placement.act(c.offset);
       const Eigen::Vector3d in_face = face.placement.actInv(Eigen::Vector3d(oMface_joint.rotation().transpose() * relative));
-      sd.gaps[i] = h.normal.dot(in_face) - h.offset - c.radius;
+      sd.out.gaps[i] = h.normal.dot(in_face) - h.offset - c.radius;
     } else {
       const Eigen::Vector3d center = oMj.act(f.placement.act(c.offset));
-      sd.gaps[i] = sd.plane_normal.col(c.halfspace).dot(center) - sd.plane_offset[c.halfspace] - c.radius;
+      sd.out.gaps[i] = sd.work->plane_normal.col(c.halfspace).dot(center) - sd.work->plane_offset[c.halfspace] - c.radius;
     }
-    if (sd.gaps[i] <= sim.settings.activation_distance) {
-      sd.active.push_back(static_cast<int>(i));
-      sd.candidate_rows[i] = candidateRows(sim, static_cast<int>(i));
+    if (sd.out.gaps[i] <= sim.settings.activation_distance) {
+      sd.out.active.push_back(static_cast<int>(i));
+      sd.out.candidate_rows[i] = candidateRows(sim, static_cast<int>(i));
     }
   }
   // coal pairs: each reported point (signed distance below the activation
@@ -110,28 +110,28 @@ void detectContacts(const SimulatorModel& sim, SimulatorData& sd) {
   // Geometry placements (pinocchio::updateGeometryPlacements, from the parts' placements).
   for (std::size_t g = 0; g < sim.geometry.geometryObjects.size(); ++g) {
     const pinocchio::GeometryObject& object = sim.geometry.geometryObjects[g];
-    sd.geometry_data.oMg[g] = jointPlacement(sim, sd, object.parentJoint) * object.placement;
+    sd.work->geometry_data.oMg[g] = jointPlacement(sim, sd, object.parentJoint) * object.placement;
   }
   int slot = static_cast<int>(sim.contacts.size());
   std::array<int, 64> chosen;
   for (const GeometryPairContact& g : sim.pairs) {
     const pinocchio::CollisionPair& cp = sim.geometry.collisionPairs[g.pair];
-    coal::CollisionResult& res = sd.geometry_data.collisionResults[g.pair];
+    coal::CollisionResult& res = sd.work->geometry_data.collisionResults[g.pair];
     res.clear();
     // broad phase: bounding spheres farther apart than the activation distance cannot touch
     const double reach = sim.geometry_radius[cp.first] + sim.geometry_radius[cp.second] +
                          sim.settings.activation_distance;
     int found = 0;
     if (!std::isfinite(reach) ||
-        (sd.geometry_data.oMg[cp.first].act(sim.geometry_center[cp.first]) -
-         sd.geometry_data.oMg[cp.second].act(sim.geometry_center[cp.second])).norm() <= reach) {
-      pinocchio::computeCollision(sim.geometry, sd.geometry_data, g.pair);
+        (sd.work->geometry_data.oMg[cp.first].act(sim.geometry_center[cp.first]) -
+         sd.work->geometry_data.oMg[cp.second].act(sim.geometry_center[cp.second])).norm() <= reach) {
+      pinocchio::computeCollision(sim.geometry, sd.work->geometry_data, g.pair);
       found = std::min<int>(static_cast<int>(res.numContacts()), g.max_contacts);
     }
     const coal::ContactPatch* patch = nullptr;
     if (g.patch && found > 0) {
-      pinocchio::computeContactPatch(sim.geometry, sd.geometry_data, g.pair);
-      const coal::ContactPatchResult& patches = sd.geometry_data.contactPatchResults[g.pair];
+      pinocchio::computeContactPatch(sim.geometry, sd.work->geometry_data, g.pair);
+      const coal::ContactPatchResult& patches = sd.work->geometry_data.contactPatchResults[g.pair];
       if (patches.numContactPatches() > 0 && patches.getContactPatch(0).size() > 0) {
         patch = &patches.getContactPatch(0);
         found = spreadVertices(*patch, g.max_contacts, chosen);
@@ -139,28 +139,28 @@ void detectContacts(const SimulatorModel& sim, SimulatorData& sd) {
     }
     for (int k = 0; k < g.max_contacts; ++k, ++slot) {
       if (k >= found) {
-        sd.gaps[slot] = std::numeric_limits<double>::infinity();
+        sd.out.gaps[slot] = std::numeric_limits<double>::infinity();
         continue;
       }
       Eigen::Vector3d n;
       if (patch != nullptr) {  // one normal and depth for the patch (coal 3: signed, < 0 overlapping)
-        sd.gaps[slot] = patch->penetration_depth;
+        sd.out.gaps[slot] = patch->penetration_depth;
         n = patch->getNormal().normalized();
-        sd.slot_point.col(slot) = patch->getPoint(static_cast<size_t>(chosen[k]));
+        sd.out.slot_point.col(slot) = patch->getPoint(static_cast<size_t>(chosen[k]));
       } else {
         const coal::Contact& c = res.getContact(static_cast<size_t>(k));
-        sd.gaps[slot] = c.penetration_depth;  // signed distance (coal 3: < 0 overlapping)
+        sd.out.gaps[slot] = c.penetration_depth;  // signed distance (coal 3: < 0 overlapping)
         n = c.normal.normalized();  // from the pair's first geometry to its second
-        sd.slot_point.col(slot) = c.pos;
+        sd.out.slot_point.col(slot) = c.pos;
       }
-      sd.slot_normal.col(slot) = n;
+      sd.out.slot_normal.col(slot) = n;
       Eigen::Vector3d t1, t2;
       tangentsOf(n, t1, t2);
-      sd.slot_t1.col(slot) = t1;
-      sd.slot_t2.col(slot) = t2;
-      if (sd.gaps[slot] <= sim.settings.activation_distance) {
-        sd.active.push_back(slot);
-        sd.candidate_rows[slot] = candidateRows(sim, slot);
+      sd.out.slot_t1.col(slot) = t1;
+      sd.out.slot_t2.col(slot) = t2;
+      if (sd.out.gaps[slot] <= sim.settings.activation_distance) {
+        sd.out.active.push_back(slot);
+        sd.out.candidate_rows[slot] = candidateRows(sim, slot);
       }
     }
   }

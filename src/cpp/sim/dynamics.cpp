@@ -28,7 +28,7 @@ namespace stiction {
 
 void computeControl(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                     const Eigen::VectorXd& v) {
-  sd.tau.resize(sim.model.nv);
+  sd.out.tau.resize(sim.model.nv);
   const JointControl& c = sd.control;
   const int nv = sim.model.nv;
   if (c.kp.size() != nv || c.kd.size() != nv || c.v_target.size() != nv || c.tau_ff.size() != nv ||
@@ -44,15 +44,15 @@ void computeControl(const SimulatorModel& sim, SimulatorData& sd, const Eigen::V
   for (pinocchio::JointIndex j = 1; direct && j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
     direct = vector_space(j) || c.kp.segment(model.idx_vs[j], model.nvs[j]).isZero(0.0);
   if (direct) {
-    sd.dv.resize(nv);
+    sd.work->dv.resize(nv);
     for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j) {
       const int iv = model.idx_vs[j], iq = model.idx_qs[j], n = model.nvs[j];
-      for (int k = 0; k < n; ++k) sd.dv[iv + k] = vector_space(j) ? c.q_target[iq + k] - q[iq + k] : 0.0;
+      for (int k = 0; k < n; ++k) sd.work->dv[iv + k] = vector_space(j) ? c.q_target[iq + k] - q[iq + k] : 0.0;
     }
   } else {
-    pinocchio::difference(model, q, c.q_target, sd.dv);
+    pinocchio::difference(model, q, c.q_target, sd.work->dv);
   }
-  sd.tau = c.kp.cwiseProduct(sd.dv) + c.kd.cwiseProduct(c.v_target - v) + c.tau_ff;
+  sd.out.tau = c.kp.cwiseProduct(sd.work->dv) + c.kd.cwiseProduct(c.v_target - v) + c.tau_ff;
 }
 
 namespace stages {
@@ -180,11 +180,11 @@ bool contactSupport(const pinocchio::Data& data, SystemWork& w) {
 void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                   const Eigen::VectorXd& v, double implicit_pd_step) {
   computeControl(sim, sd, q, v);  // tau (world coordinates)
-  if (implicit_pd_step > 0.0) sd.tau -= implicit_pd_step * sd.control.kp.cwiseProduct(v);
+  if (implicit_pd_step > 0.0) sd.out.tau -= implicit_pd_step * sd.control.kp.cwiseProduct(v);
   for (std::size_t s = 0; s < sim.systems.size(); ++s) {
     const SystemModel& part = sim.systems[s];
     const pinocchio::Model& model = part.model;
-    SystemWork& w = sd.parts[s];
+    SystemWork& w = sd.work->parts[s];
     // A free body without joint PD: its mass matrix in its own frame is constant (factored at
     // the first step). Else M (a robot's from stage 1's terms, a free body's by crba) and the
     // tree Cholesky every step.
@@ -204,11 +204,11 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
       if (part.free_body) freeBodyScaling(w);
     }
     if (part.free_body) freeBodyNonLinearEffects(model, w.data, w.nle);
-    gatherV(part, sd.tau, w.tau);
+    gatherV(part, sd.out.tau, w.tau);
     w.v_free = w.tau - w.nle;
     partMassSolve(part, w.data, w.v_free);  // M^-1 (tau - nle): the free acceleration
-    scatterV(part, w.nle, sd.nle);
-    scatterV(part, w.v_free, sd.v_free);
+    scatterV(part, w.nle, sd.out.nle);
+    scatterV(part, w.v_free, sd.work->v_free);
   }
 }
 
@@ -267,7 +267,7 @@ void scaledUnitUpperSolve(const Eigen::MatrixXd& U, const double* dinv, const st
 // returns the entries of the parts' dense shares, sum of n_s^2.
 Eigen::Index delassusFactors(SimulatorData& sd) {
   Eigen::Index entries = 0;
-  for (SystemWork& w : sd.parts) {
+  for (SystemWork& w : sd.work->parts) {
     const auto n = static_cast<Eigen::Index>(w.rows.size());
     entries += n * n;
     if (n == 0) continue;
@@ -393,7 +393,7 @@ __attribute__((target("avx2,fma"))) bool freeBodyBlocksAvx2(const AssemblyBlock*
 
 #endif
 
-// The sparse A's values straight from the parts' W (the plan, sd.assembly, listed when the pattern
+// The sparse A's values straight from the parts' W (the plan, sd.work->assembly, listed when the pattern
 // was last assembled): each block of the lower triangle (a pair of contacts, or anchors) is the
 // product of its two blocks' columns of W in the one or two parts both belong to, written with its
 // mirror, three values at a time. (The parts' dense shares summed into place entry by entry cost
@@ -401,20 +401,20 @@ __attribute__((target("avx2,fma"))) bool freeBodyBlocksAvx2(const AssemblyBlock*
 // vector kernel wrote every value and found them all finite (solveContacts' check, 2 % of a
 // 1024-contact tower's step, is then done).
 bool assembleFromPlan(SimulatorData& sd, double* value) {
-  sd.part_w.resize(sd.parts.size());
-  for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.part_w[s] = sd.parts[s].W.data();
+  sd.work->part_w.resize(sd.work->parts.size());
+  for (std::size_t s = 0; s < sd.work->parts.size(); ++s) sd.work->part_w[s] = sd.work->parts[s].W.data();
   bool known_finite = false;
 #ifdef STICTION_X86_KERNELS
   const bool vector = vectorKernels();
   if (vector) {
-    sd.part_wt.resize(sd.parts.size());
-    sd.part_stride.resize(sd.parts.size());
-    for (std::size_t s = 0; s < sd.parts.size(); ++s) {
-      sd.part_wt[s] = sd.parts[s].Wt.data();
-      sd.part_stride[s] = static_cast<int>(sd.parts[s].rows.size());
+    sd.work->part_wt.resize(sd.work->parts.size());
+    sd.work->part_stride.resize(sd.work->parts.size());
+    for (std::size_t s = 0; s < sd.work->parts.size(); ++s) {
+      sd.work->part_wt[s] = sd.work->parts[s].Wt.data();
+      sd.work->part_stride[s] = static_cast<int>(sd.work->parts[s].rows.size());
     }
     known_finite =
-        freeBodyBlocksAvx2(sd.assembly.data(), sd.assembly.size(), sd.part_wt.data(), sd.part_stride.data(), value);
+        freeBodyBlocksAvx2(sd.work->assembly.data(), sd.work->assembly.size(), sd.work->part_wt.data(), sd.work->part_stride.data(), value);
   }
 #else
   const bool vector = false;
@@ -423,24 +423,24 @@ bool assembleFromPlan(SimulatorData& sd, double* value) {
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5];
   };
   double block[9];  // column-major 3 x 3
-  for (const AssemblyBlock& e : sd.assembly) {
+  for (const AssemblyBlock& e : sd.work->assembly) {
     const int ki = e.rows, kj = e.cols;
     if (e.free_bodies && vector) continue;  // done above
     known_finite = false;  // (checked by solveContacts)
     if (e.free_bodies) {  // free bodies' spatial contacts: W has 6 rows, blocks are 3 x 3
-      const double* wi = sd.part_w[static_cast<std::size_t>(e.part[0])] + 6 * e.row[0];
-      const double* wj = sd.part_w[static_cast<std::size_t>(e.part[0])] + 6 * e.col[0];
+      const double* wi = sd.work->part_w[static_cast<std::size_t>(e.part[0])] + 6 * e.row[0];
+      const double* wj = sd.work->part_w[static_cast<std::size_t>(e.part[0])] + 6 * e.col[0];
       for (int c = 0; c < 3; ++c)
         for (int r = 0; r < 3; ++r) block[r + 3 * c] = dot6(wi + 6 * r, wj + 6 * c);
       if (e.part[1] >= 0) {
-        wi = sd.part_w[static_cast<std::size_t>(e.part[1])] + 6 * e.row[1];
-        wj = sd.part_w[static_cast<std::size_t>(e.part[1])] + 6 * e.col[1];
+        wi = sd.work->part_w[static_cast<std::size_t>(e.part[1])] + 6 * e.row[1];
+        wj = sd.work->part_w[static_cast<std::size_t>(e.part[1])] + 6 * e.col[1];
         for (int c = 0; c < 3; ++c)
           for (int r = 0; r < 3; ++r) block[r + 3 * c] += dot6(wi + 6 * r, wj + 6 * c);
       }
     } else {
       for (int p = 0; p < 2 && e.part[p] >= 0; ++p) {
-        const Eigen::MatrixXd& W = sd.parts[static_cast<std::size_t>(e.part[p])].W;
+        const Eigen::MatrixXd& W = sd.work->parts[static_cast<std::size_t>(e.part[p])].W;
         for (int c = 0; c < kj; ++c)
           for (int r = 0; r < ki; ++r) {
             const double d = W.col(e.row[p] + r).dot(W.col(e.col[p] + c));
@@ -457,17 +457,17 @@ bool assembleFromPlan(SimulatorData& sd, double* value) {
   return known_finite;
 }
 
-// The plan of assembleFromPlan for A_sparse's pattern just built (dense: for sd.A, stored by
+// The plan of assembleFromPlan for A_sparse's pattern just built (dense: for sd.out.A, stored by
 // columns): the blocks are the active contacts' rows, then the anchors' (3 each). False when a
 // block pair has more than two shares (blocks in more than two parts: not a contact's) or a block
 // is wider than 3 rows.
 bool planAssembly(const SimulatorModel& sim, SimulatorData& sd, bool dense) {
-  const Eigen::Index rows = sd.rows;
+  const Eigen::Index rows = sd.out.rows;
   std::vector<int> block_of(static_cast<std::size_t>(rows)), start;  // each row's block; each block's first row
   int row = 0;
-  for (int i : sd.active) {
+  for (int i : sd.out.active) {
     start.push_back(row);
-    row += sd.candidate_rows[i];
+    row += sd.out.candidate_rows[i];
   }
   for (std::size_t a = 0; a < sim.anchors.size(); ++a, row += 3) start.push_back(row);
   start.push_back(row);
@@ -477,16 +477,16 @@ bool planAssembly(const SimulatorModel& sim, SimulatorData& sd, bool dense) {
     if (start[b + 1] - start[b] > 3) return false;
     for (int r = start[b]; r < start[b + 1]; ++r) block_of[static_cast<std::size_t>(r)] = b;
   }
-  const int* outer = sd.A_sparse.outerIndexPtr();
-  const int* inner = sd.A_sparse.innerIndexPtr();
+  const int* outer = sd.out.A_sparse.outerIndexPtr();
+  const int* inner = sd.out.A_sparse.innerIndexPtr();
   auto position = [&](int r, int c) {
     if (dense) return static_cast<int>(r + c * rows);
     return static_cast<int>(std::lower_bound(inner + outer[c], inner + outer[c + 1], r) - inner);
   };
   std::unordered_map<long long, int> index;  // (block i, block j) -> its entry
-  sd.assembly.clear();
-  for (std::size_t s = 0; s < sd.parts.size(); ++s) {
-    const std::vector<int>& part_rows = sd.parts[s].rows;
+  sd.work->assembly.clear();
+  for (std::size_t s = 0; s < sd.work->parts.size(); ++s) {
+    const std::vector<int>& part_rows = sd.work->parts[s].rows;
     // the part's blocks and the local row each starts at (a block's rows are all in its parts)
     std::vector<std::pair<int, int>> part_blocks;
     for (std::size_t k = 0; k < part_rows.size(); ++k)
@@ -496,7 +496,7 @@ bool planAssembly(const SimulatorModel& sim, SimulatorData& sd, bool dense) {
       for (const auto& [bi, li] : part_blocks) {
         if (bi < bj) continue;  // the lower triangle; the mirror takes the rest
         const long long key = static_cast<long long>(bi) * blocks + bj;
-        auto [it, fresh] = index.emplace(key, static_cast<int>(sd.assembly.size()));
+        auto [it, fresh] = index.emplace(key, static_cast<int>(sd.work->assembly.size()));
         if (fresh) {
           AssemblyBlock e;
           e.rows = start[static_cast<std::size_t>(bi) + 1] - start[static_cast<std::size_t>(bi)];
@@ -508,9 +508,9 @@ bool planAssembly(const SimulatorModel& sim, SimulatorData& sd, bool dense) {
           e.row[0] = li;
           e.col[0] = lj;
           e.free_bodies = e.rows == 3 && e.cols == 3 && sim.systems[s].free_body;
-          sd.assembly.push_back(e);
+          sd.work->assembly.push_back(e);
         } else {
-          AssemblyBlock& e = sd.assembly[static_cast<std::size_t>(it->second)];
+          AssemblyBlock& e = sd.work->assembly[static_cast<std::size_t>(it->second)];
           if (e.part[1] >= 0) return false;
           e.part[1] = static_cast<int>(s);
           e.row[1] = li;
@@ -522,25 +522,25 @@ bool planAssembly(const SimulatorModel& sim, SimulatorData& sd, bool dense) {
   return true;
 }
 
-// The parts hold the rows they held when the plan was made (sd.triplet_part_rows).
+// The parts hold the rows they held when the plan was made (sd.work->triplet_part_rows).
 bool samePartRows(const SimulatorData& sd) {
-  if (sd.triplet_part_rows.size() != sd.parts.size()) return false;
-  for (std::size_t s = 0; s < sd.parts.size(); ++s)
-    if (sd.parts[s].rows != sd.triplet_part_rows[s]) return false;
+  if (sd.work->triplet_part_rows.size() != sd.work->parts.size()) return false;
+  for (std::size_t s = 0; s < sd.work->parts.size(); ++s)
+    if (sd.work->parts[s].rows != sd.work->triplet_part_rows[s]) return false;
   return true;
 }
 
 }  // namespace
 
 void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
-  const Eigen::Index rows = sd.rows;
-  sd.robot_chains = false;
+  const Eigen::Index rows = sd.out.rows;
+  sd.work->robot_chains = false;
   if (wholeWorldPart(sim, sd) && !sim.systems[0].free_body && robotOperator(sim, sd)) {
     // one robot, each contact on one root path: A by the tree's chains (robot_delassus.cpp)
-    sd.robot_chains = true;
-    sd.sparse = false;
-    sd.a_in_operator = false;
-    if (sd.A_sparse.rows() != 0) sd.A_sparse.resize(0, 0);
+    sd.work->robot_chains = true;
+    sd.out.sparse = false;
+    sd.work->a_in_operator = false;
+    if (sd.out.A_sparse.rows() != 0) sd.out.A_sparse.resize(0, 0);
     return;
   }
   const Eigen::Index entries = delassusFactors(sd);
@@ -548,70 +548,70 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
   // (a storage choice measured on cube grids, not the default rule's kAdmmAboveRows), at most
   // kSparseDelassusDensity of the entries (a tower's block-tridiagonal A is 14-20 %;
   // thresholds.hpp).
-  sd.sparse = sd.parts.size() > 1 && rows > kSparseDelassusRows &&
+  sd.out.sparse = sd.work->parts.size() > 1 && rows > kSparseDelassusRows &&
               double(entries) <= kSparseDelassusDensity * double(rows) * double(rows);
-  sd.a_in_operator = false;  // A_sparse holds this step's A again
-  sd.a_known_finite = false;
-  if (sd.sparse && sd.parts_share_rows) {  // rows shared by two parts (contacts between bodies)
+  sd.work->a_in_operator = false;  // A_sparse holds this step's A again
+  sd.work->a_known_finite = false;
+  if (sd.out.sparse && sd.work->parts_share_rows) {  // rows shared by two parts (contacts between bodies)
     // While the entries' (row, column) sequence is last step's (the same contacts on the same
     // rows), A's pattern and the plan of its entries hold: the values are computed in place
     // (setFromTriplets was a third of a tower's step).
     const auto count = static_cast<std::size_t>(entries);
-    bool same = sd.assembly_kind == AssemblyKind::kSparse && sd.A_sparse.rows() == rows &&
-                sd.triplet_position.size() == count && sd.triplets.size() == count && samePartRows(sd);
+    bool same = sd.work->assembly_kind == AssemblyKind::kSparse && sd.out.A_sparse.rows() == rows &&
+                sd.work->triplet_position.size() == count && sd.work->triplets.size() == count && samePartRows(sd);
     if (same) {
-      sd.a_known_finite = assembleFromPlan(sd, sd.A_sparse.valuePtr());
-      sd.A.resize(0, 0);
+      sd.work->a_known_finite = assembleFromPlan(sd, sd.out.A_sparse.valuePtr());
+      sd.out.A.resize(0, 0);
       return;
     }
-    for (SystemWork& w : sd.parts) partOperator(w);
-    sd.triplets.clear();
-    sd.triplets.reserve(count);
-    for (const SystemWork& w : sd.parts)
+    for (SystemWork& w : sd.work->parts) partOperator(w);
+    sd.work->triplets.clear();
+    sd.work->triplets.reserve(count);
+    for (const SystemWork& w : sd.work->parts)
       for (Eigen::Index c = 0; c < w.A.cols() && !w.rows.empty(); ++c)
-        for (Eigen::Index r = 0; r < w.A.rows(); ++r) sd.triplets.emplace_back(w.rows[r], w.rows[c], w.A(r, c));
-    sd.triplet_part_rows.resize(sd.parts.size());
-    for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.triplet_part_rows[s] = sd.parts[s].rows;
-    sd.A_sparse.resize(rows, rows);
-    sd.A_sparse.setFromTriplets(sd.triplets.begin(), sd.triplets.end());
-    ++sd.pattern_version;
-    sd.A_sparse.makeCompressed();
+        for (Eigen::Index r = 0; r < w.A.rows(); ++r) sd.work->triplets.emplace_back(w.rows[r], w.rows[c], w.A(r, c));
+    sd.work->triplet_part_rows.resize(sd.work->parts.size());
+    for (std::size_t s = 0; s < sd.work->parts.size(); ++s) sd.work->triplet_part_rows[s] = sd.work->parts[s].rows;
+    sd.out.A_sparse.resize(rows, rows);
+    sd.out.A_sparse.setFromTriplets(sd.work->triplets.begin(), sd.work->triplets.end());
+    ++sd.work->pattern_version;
+    sd.out.A_sparse.makeCompressed();
     // each entry's position in the compressed storage (a search in its column)
-    sd.triplet_position.resize(count);
-    const int* outer = sd.A_sparse.outerIndexPtr();
-    const int* inner = sd.A_sparse.innerIndexPtr();
+    sd.work->triplet_position.resize(count);
+    const int* outer = sd.out.A_sparse.outerIndexPtr();
+    const int* inner = sd.out.A_sparse.innerIndexPtr();
     for (std::size_t t = 0; t < count; ++t) {
-      const int row = sd.triplets[t].row(), col = sd.triplets[t].col();
-      sd.triplet_position[t] = static_cast<int>(std::lower_bound(inner + outer[col], inner + outer[col + 1], row) - inner);
+      const int row = sd.work->triplets[t].row(), col = sd.work->triplets[t].col();
+      sd.work->triplet_position[t] = static_cast<int>(std::lower_bound(inner + outer[col], inner + outer[col + 1], row) - inner);
     }
-    sd.assembly_kind = planAssembly(sim, sd, /*dense=*/false) ? AssemblyKind::kSparse : AssemblyKind::kNone;
-    sd.A.resize(0, 0);
+    sd.work->assembly_kind = planAssembly(sim, sd, /*dense=*/false) ? AssemblyKind::kSparse : AssemblyKind::kNone;
+    sd.out.A.resize(0, 0);
     return;
   }
-  if (sd.sparse) {
-    for (SystemWork& w : sd.parts) partOperator(w);
+  if (sd.out.sparse) {
+    for (SystemWork& w : sd.work->parts) partOperator(w);
     // Every row in one part: column c of A is its part's column, rows in the part's (ascending)
     // order; written straight into the compressed storage.
-    sd.row_part.assign(static_cast<std::size_t>(rows), -1);
-    sd.row_local.resize(static_cast<std::size_t>(rows));
-    for (std::size_t s = 0; s < sd.parts.size(); ++s)
-      for (std::size_t k = 0; k < sd.parts[s].rows.size(); ++k) {
-        sd.row_part[sd.parts[s].rows[k]] = static_cast<int>(s);
-        sd.row_local[sd.parts[s].rows[k]] = static_cast<int>(k);
+    sd.work->row_part.assign(static_cast<std::size_t>(rows), -1);
+    sd.work->row_local.resize(static_cast<std::size_t>(rows));
+    for (std::size_t s = 0; s < sd.work->parts.size(); ++s)
+      for (std::size_t k = 0; k < sd.work->parts[s].rows.size(); ++k) {
+        sd.work->row_part[sd.work->parts[s].rows[k]] = static_cast<int>(s);
+        sd.work->row_local[sd.work->parts[s].rows[k]] = static_cast<int>(k);
       }
-    sd.A_sparse.resize(rows, rows);
-    sd.A_sparse.resizeNonZeros(entries);
-    ++sd.pattern_version;  // (written anew each step: assignValues compares it)
-    int* outer = sd.A_sparse.outerIndexPtr();
-    int* inner = sd.A_sparse.innerIndexPtr();
-    double* value = sd.A_sparse.valuePtr();
+    sd.out.A_sparse.resize(rows, rows);
+    sd.out.A_sparse.resizeNonZeros(entries);
+    ++sd.work->pattern_version;  // (written anew each step: assignValues compares it)
+    int* outer = sd.out.A_sparse.outerIndexPtr();
+    int* inner = sd.out.A_sparse.innerIndexPtr();
+    double* value = sd.out.A_sparse.valuePtr();
     Eigen::Index pos = 0;
     outer[0] = 0;
     for (Eigen::Index c = 0; c < rows; ++c) {
-      const int s = sd.row_part[c];
+      const int s = sd.work->row_part[c];
       if (s >= 0) {
-        const SystemWork& w = sd.parts[s];
-        const int k = sd.row_local[c];
+        const SystemWork& w = sd.work->parts[s];
+        const int k = sd.work->row_local[c];
         for (std::size_t r = 0; r < w.rows.size(); ++r, ++pos) {
           inner[pos] = w.rows[r];
           value[pos] = w.A(static_cast<Eigen::Index>(r), k);
@@ -619,39 +619,39 @@ void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
       }
       outer[c + 1] = static_cast<int>(pos);
     }
-    sd.A.resize(0, 0);
+    sd.out.A.resize(0, 0);
     return;
   }
-  sd.A_sparse.resize(0, 0);
+  sd.out.A_sparse.resize(0, 0);
   if (wholeWorldPart(sim, sd)) {
-    partOperator(sd.parts[0]);
-    sd.A = sd.parts[0].A;
+    partOperator(sd.work->parts[0]);
+    sd.out.A = sd.work->parts[0].A;
     return;
   }
   // Several parts, dense (a few bodies): the same plan of blocks, positions in A's columns; the
   // entries no two rows of a part share stay zero while the parts' rows stay.
-  if (sd.assembly_kind == AssemblyKind::kDense && sd.A.rows() == rows && sd.A.cols() == rows && samePartRows(sd)) {
-    assembleFromPlan(sd, sd.A.data());
+  if (sd.work->assembly_kind == AssemblyKind::kDense && sd.out.A.rows() == rows && sd.out.A.cols() == rows && samePartRows(sd)) {
+    assembleFromPlan(sd, sd.out.A.data());
     return;
   }
-  for (SystemWork& w : sd.parts) partOperator(w);
-  sd.A.setZero(rows, rows);
-  for (const SystemWork& w : sd.parts)
+  for (SystemWork& w : sd.work->parts) partOperator(w);
+  sd.out.A.setZero(rows, rows);
+  for (const SystemWork& w : sd.work->parts)
     for (Eigen::Index c = 0; c < static_cast<Eigen::Index>(w.rows.size()); ++c)
-      for (Eigen::Index r = 0; r < static_cast<Eigen::Index>(w.rows.size()); ++r) sd.A(w.rows[r], w.rows[c]) += w.A(r, c);
-  sd.triplet_part_rows.resize(sd.parts.size());
-  for (std::size_t s = 0; s < sd.parts.size(); ++s) sd.triplet_part_rows[s] = sd.parts[s].rows;
-  sd.assembly_kind = planAssembly(sim, sd, /*dense=*/true) ? AssemblyKind::kDense : AssemblyKind::kNone;
+      for (Eigen::Index r = 0; r < static_cast<Eigen::Index>(w.rows.size()); ++r) sd.out.A(w.rows[r], w.rows[c]) += w.A(r, c);
+  sd.work->triplet_part_rows.resize(sd.work->parts.size());
+  for (std::size_t s = 0; s < sd.work->parts.size(); ++s) sd.work->triplet_part_rows[s] = sd.work->parts[s].rows;
+  sd.work->assembly_kind = planAssembly(sim, sd, /*dense=*/true) ? AssemblyKind::kDense : AssemblyKind::kNone;
 }
 
 void multiplyJacobian(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& x, Eigen::VectorXd& y) {
   if (wholeWorldPart(sim, sd)) {
-    y.noalias() = sd.parts[0].J * x;
+    y.noalias() = sd.work->parts[0].J * x;
     return;
   }
-  y.setZero(sd.rows);
-  for (std::size_t s = 0; s < sd.parts.size(); ++s) {
-    SystemWork& w = sd.parts[s];
+  y.setZero(sd.out.rows);
+  for (std::size_t s = 0; s < sd.work->parts.size(); ++s) {
+    SystemWork& w = sd.work->parts[s];
     if (w.rows.empty()) continue;
     gatherV(sim.systems[s], x, w.x);
     w.row_values.noalias() = w.J * w.x;  // (J is stored by columns: a product, not a dot per row)
@@ -661,11 +661,11 @@ void multiplyJacobian(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
 
 void solveJacobianTransposed(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& lambda,
                              Eigen::VectorXd& dv) {
-  if (sd.robot_chains) {
+  if (sd.work->robot_chains) {
     // M^-1 J^T lambda = U^-T D^-1/2 (Y lambda), Y = D^-1/2 U^-1 J^T the Delassus stage's (chain by
     // chain, its blocks' entries on their chains): one back substitution instead of J^T lambda
     // and both of M's
-    const RobotOperatorPlan& plan = sd.parts[0].robot_plan;
+    const RobotOperatorPlan& plan = sd.work->parts[0].robot_plan;
     dv.setZero(sim.model.nv);
     const double* Y = plan.Y.data();
     for (const RobotOperatorPlan::Block& b : plan.blocks) {
@@ -678,17 +678,17 @@ void solveJacobianTransposed(const SimulatorModel& sim, SimulatorData& sd, const
       }
     }
     for (Eigen::Index i = 0; i < dv.size(); ++i) dv[i] *= plan.scale[static_cast<std::size_t>(i)];
-    pinocchio::cholesky::Utiv(sim.systems[0].model, sd.parts[0].data, dv);
+    pinocchio::cholesky::Utiv(sim.systems[0].model, sd.work->parts[0].data, dv);
     return;
   }
   if (wholeWorldPart(sim, sd)) {
-    dv.noalias() = sd.parts[0].J.transpose() * lambda;
-    partMassSolve(sim.systems[0], sd.parts[0].data, dv);
+    dv.noalias() = sd.work->parts[0].J.transpose() * lambda;
+    partMassSolve(sim.systems[0], sd.work->parts[0].data, dv);
     return;
   }
   dv.setZero(sim.model.nv);
-  for (std::size_t s = 0; s < sd.parts.size(); ++s) {
-    SystemWork& w = sd.parts[s];
+  for (std::size_t s = 0; s < sd.work->parts.size(); ++s) {
+    SystemWork& w = sd.work->parts[s];
     if (w.rows.empty()) continue;
     w.x.setZero(w.J.cols());
     for (Eigen::Index r = 0; r < w.J.rows(); ++r) w.x += lambda[w.rows[r]] * w.J.row(r).transpose();
@@ -701,16 +701,16 @@ void rightHandSide(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Ve
                    bool tangential_drift) {
   // eq. 27 with Phi = nle - tau: b = J M^-1 Phi - J' v - (2 zeta / delta) J v - Psi / delta^2
   // (J v_free and J v in one product: J (v_free + (2 zeta / delta) v))
-  sd.nv_scratch = sd.v_free + (2.0 * zeta / delta) * v;
-  multiplyJacobian(sim, sd, sd.nv_scratch, sd.row_scratch);
-  sd.b = -sd.row_scratch;
-  sd.b -= sd.drift;
-  sd.b -= sd.position_error / (delta * delta);
+  sd.work->nv_scratch = sd.work->v_free + (2.0 * zeta / delta) * v;
+  multiplyJacobian(sim, sd, sd.work->nv_scratch, sd.work->row_scratch);
+  sd.out.b = -sd.work->row_scratch;
+  sd.out.b -= sd.out.drift;
+  sd.out.b -= sd.out.position_error / (delta * delta);
   // Time stepping drops the J' v term on the tangential rows (the paper allows it, §3.3):
   // a sticking contact then ends the step with exactly zero slip velocity, J_t v+ = 0,
   // instead of -h J_t' v. Normal rows keep it: it predicts the gap. (It is added back
   // rather than left out, as it always was: b's rounding is part of the trajectories.)
-  if (!tangential_drift) sd.b += sd.drift.cwiseProduct(sd.tangent_row);
+  if (!tangential_drift) sd.out.b += sd.out.drift.cwiseProduct(sd.out.tangent_row);
 }
 
 void projectRedundantSets(const SimulatorModel& sim, SimulatorData& sd) {
@@ -724,32 +724,32 @@ void projectRedundantSets(const SimulatorModel& sim, SimulatorData& sd) {
   // consistent value: nothing any lambda could produce is removed). Called only for a step whose
   // solve missed the tolerance (solveContacts): an SVD per redundant set (every tower interface
   // is one) would cost a tenth of a tower's step.
-  sd.inconsistent_groups = 0;
-  const std::size_t count = sd.blocks.size();
+  sd.out.inconsistent_groups = 0;
+  const std::size_t count = sd.work->blocks.size();
   if (count < 3) return;
-  sd.block_order.resize(count);
-  for (std::size_t i = 0; i < count; ++i) sd.block_order[i] = static_cast<int>(i);
-  const auto key = [&](int i) { return std::make_pair(sd.blocks[i].plus, sd.blocks[i].minus); };
-  std::sort(sd.block_order.begin(), sd.block_order.end(), [&](int a, int b) { return key(a) < key(b); });
-  const double threshold = 0.1 * sim.settings.solver_settings.tolerance * sd.b.norm();
+  sd.work->block_order.resize(count);
+  for (std::size_t i = 0; i < count; ++i) sd.work->block_order[i] = static_cast<int>(i);
+  const auto key = [&](int i) { return std::make_pair(sd.work->blocks[i].plus, sd.work->blocks[i].minus); };
+  std::sort(sd.work->block_order.begin(), sd.work->block_order.end(), [&](int a, int b) { return key(a) < key(b); });
+  const double threshold = 0.1 * sim.settings.solver_settings.tolerance * sd.out.b.norm();
   Eigen::MatrixXd G;
   Eigen::VectorXd bg;
   for (std::size_t first = 0; first < count;) {
     std::size_t last = first + 1;
-    int rows = sd.blocks[sd.block_order[first]].k;
-    while (last < count && key(sd.block_order[last]) == key(sd.block_order[first]))
-      rows += sd.blocks[sd.block_order[last++]].k;
+    int rows = sd.work->blocks[sd.work->block_order[first]].k;
+    while (last < count && key(sd.work->block_order[last]) == key(sd.work->block_order[first]))
+      rows += sd.work->blocks[sd.work->block_order[last++]].k;
     if (rows > 6) {
       G.resize(rows, 6);
       bg.resize(rows);
       int r = 0;
       for (std::size_t j = first; j < last; ++j) {
-        const SimulatorData::ContactBlock& block = sd.blocks[sd.block_order[j]];
+        const SimulatorWorkspace::ContactBlock& block = sd.work->blocks[sd.work->block_order[j]];
         for (int q = 0; q < block.k; ++q, ++r) {
           const Eigen::Vector3d t = block.T.row(q).transpose();
           G.row(r).head<3>() = t.transpose();
           G.row(r).tail<3>() = block.point.cross(t).transpose();
-          bg[r] = sd.b[block.row + q];
+          bg[r] = sd.out.b[block.row + q];
         }
       }
       const Eigen::JacobiSVD<Eigen::MatrixXd> svd(G, Eigen::ComputeFullU);
@@ -762,10 +762,10 @@ void projectRedundantSets(const SimulatorModel& sim, SimulatorData& sd) {
         bg -= null * component;
         r = 0;
         for (std::size_t j = first; j < last; ++j) {
-          const SimulatorData::ContactBlock& block = sd.blocks[sd.block_order[j]];
-          for (int q = 0; q < block.k; ++q, ++r) sd.b[block.row + q] = bg[r];
+          const SimulatorWorkspace::ContactBlock& block = sd.work->blocks[sd.work->block_order[j]];
+          for (int q = 0; q < block.k; ++q, ++r) sd.out.b[block.row + q] = bg[r];
         }
-        ++sd.inconsistent_groups;
+        ++sd.out.inconsistent_groups;
       }
     }
     first = last;

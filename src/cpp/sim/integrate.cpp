@@ -75,31 +75,31 @@ void acceleration(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
   buildContactProblem(sim, sd, q, v, delta, sim.settings.zeta, 0.0);  // stages 1-4, timed
   Stopwatch watch;
   solveContacts(sim, sd, 1.0);
-  watch.lap(sd.timings.solve);
-  a = sd.v_free;  // M^-1 (tau - nle)
-  if (sd.rows > 0) {
-    solveJacobianTransposed(sim, sd, sd.lambda, sd.dv);  // M^-1 J^T lambda
-    a += sd.dv;
+  watch.lap(sd.out.timings.solve);
+  a = sd.work->v_free;  // M^-1 (tau - nle)
+  if (sd.out.rows > 0) {
+    solveJacobianTransposed(sim, sd, sd.out.lambda, sd.work->dv);  // M^-1 J^T lambda
+    a += sd.work->dv;
   }
-  ++sd.rhs_evaluations;
+  ++sd.out.rhs_evaluations;
 }
 
 }  // namespace
 
 void integrateTimeStep(const SimulatorModel& sim, SimulatorData& sd, double h) {
-  sd.dv = h * sd.v_free;  // h M^-1 (tau - nle)
-  addFrameTurn(sim, sd.v, h, sd.dv);
-  sd.v += sd.dv;
-  if (sd.rows > 0) {  // + M^-1 J^T P
-    solveJacobianTransposed(sim, sd, sd.result.lam, sd.dv);
-    sd.v += sd.dv;
+  sd.work->dv = h * sd.work->v_free;  // h M^-1 (tau - nle)
+  addFrameTurn(sim, sd.v, h, sd.work->dv);
+  sd.v += sd.work->dv;
+  if (sd.out.rows > 0) {  // + M^-1 J^T P
+    solveJacobianTransposed(sim, sd, sd.out.result.lam, sd.work->dv);
+    sd.v += sd.work->dv;
     // contact velocities J(q_k) v+, in the frame the solve used
-    multiplyJacobian(sim, sd, sd.v, sd.row_velocity);
+    multiplyJacobian(sim, sd, sd.v, sd.work->row_velocity);
   }
-  integrateConfiguration(sim, sd.q, sd.v, h, sd.q_tmp);  // symplectic: uses v+
-  sd.q = sd.q_tmp;
+  integrateConfiguration(sim, sd.q, sd.v, h, sd.work->q_tmp);  // symplectic: uses v+
+  sd.q = sd.work->q_tmp;
   sd.t += h;
-  sd.last_dt = h;
+  sd.out.last_dt = h;
 }
 
 // The classical RK4 tableau and Bogacki-Shampine 3(2) on the configuration's Lie group, as
@@ -151,46 +151,46 @@ void configurationRate(const SimulatorModel& sim, SimulatorData& sd, const Eigen
                        const Eigen::VectorXd& velocity, Eigen::VectorXd& k) {
   k = velocity;
   if (sim.non_abelian_joints.empty()) return;
-  lieBracket(sim, theta, velocity, sd.ode_bracket);  // [Theta, V]
-  k += 0.5 * sd.ode_bracket;
-  lieBracket(sim, theta, sd.ode_bracket, sd.ode_bracket2);  // [Theta, [Theta, V]]
-  k += (1.0 / 12.0) * sd.ode_bracket2;
+  lieBracket(sim, theta, velocity, sd.work->ode_bracket);  // [Theta, V]
+  k += 0.5 * sd.work->ode_bracket;
+  lieBracket(sim, theta, sd.work->ode_bracket, sd.work->ode_bracket2);  // [Theta, [Theta, V]]
+  k += (1.0 / 12.0) * sd.work->ode_bracket2;
 }
 
 }  // namespace
 
 void integrateRK4(const SimulatorModel& sim, SimulatorData& sd) {
   const double h = sim.settings.dt;
-  auto& V = sd.stage_v;
-  auto& Acc = sd.stage_a;
-  auto& K = sd.stage_k;
+  auto& V = sd.work->stage_v;
+  auto& Acc = sd.work->stage_a;
+  auto& K = sd.work->stage_k;
   V.resize(4);
   Acc.resize(4);
   K.resize(4);
-  sd.ode_q0 = sd.q;
-  sd.ode_v0 = sd.v;
-  sd.q_tmp.resize(sim.model.nq);
+  sd.work->ode_q0 = sd.q;
+  sd.work->ode_v0 = sd.v;
+  sd.work->q_tmp.resize(sim.model.nq);
   static const double c[4] = {0.0, 0.5, 0.5, 1.0};  // classical RK4: a_s,s-1 = c_s, the rest 0
   for (int s = 0; s < 4; ++s) {
     if (s == 0) {
-      sd.ode_theta.setZero(sim.model.nv);
-      sd.q_tmp = sd.ode_q0;
-      V[0] = sd.ode_v0;
+      sd.work->ode_theta.setZero(sim.model.nv);
+      sd.work->q_tmp = sd.work->ode_q0;
+      V[0] = sd.work->ode_v0;
     } else {
-      sd.ode_theta = c[s] * h * K[s - 1];
-      pinocchio::integrate(sim.model, sd.ode_q0, sd.ode_theta, sd.q_tmp);
-      V[s] = sd.ode_v0 + c[s] * h * Acc[s - 1];
+      sd.work->ode_theta = c[s] * h * K[s - 1];
+      pinocchio::integrate(sim.model, sd.work->ode_q0, sd.work->ode_theta, sd.work->q_tmp);
+      V[s] = sd.work->ode_v0 + c[s] * h * Acc[s - 1];
     }
-    acceleration(sim, sd, sd.q_tmp, V[s], Acc[s]);
-    configurationRate(sim, sd, sd.ode_theta, V[s], K[s]);
+    acceleration(sim, sd, sd.work->q_tmp, V[s], Acc[s]);
+    configurationRate(sim, sd, sd.work->ode_theta, V[s], K[s]);
   }
   Stopwatch watch;
-  sd.v = sd.ode_v0 + (h / 6.0) * (Acc[0] + 2.0 * Acc[1] + 2.0 * Acc[2] + Acc[3]);
-  sd.ode_theta = (h / 6.0) * (K[0] + 2.0 * K[1] + 2.0 * K[2] + K[3]);
-  pinocchio::integrate(sim.model, sd.ode_q0, sd.ode_theta, sd.q);
+  sd.v = sd.work->ode_v0 + (h / 6.0) * (Acc[0] + 2.0 * Acc[1] + 2.0 * Acc[2] + Acc[3]);
+  sd.work->ode_theta = (h / 6.0) * (K[0] + 2.0 * K[1] + 2.0 * K[2] + K[3]);
+  pinocchio::integrate(sim.model, sd.work->ode_q0, sd.work->ode_theta, sd.q);
   sd.t += h;
-  sd.last_dt = h;
-  watch.lap(sd.timings.integrate);
+  sd.out.last_dt = h;
+  watch.lap(sd.out.timings.integrate);
 }
 
 // Bogacki-Shampine 3(2) with error control on (q, v), Munthe-Kaas's way as RK4 above:
@@ -199,19 +199,19 @@ void integrateRK4(const SimulatorModel& sim, SimulatorData& sd) {
 // right-hand sides are.)
 void integrateAdaptive(const SimulatorModel& sim, SimulatorData& sd) {
   const SimulatorSettings& s = sim.settings;
-  double h = sd.next_dt > 0.0 ? std::min(sd.next_dt, s.dt) : s.dt;
-  auto& V = sd.stage_v;
-  auto& Acc = sd.stage_a;
-  auto& K = sd.stage_k;
+  double h = sd.out.next_dt > 0.0 ? std::min(sd.out.next_dt, s.dt) : s.dt;
+  auto& V = sd.work->stage_v;
+  auto& Acc = sd.work->stage_a;
+  auto& K = sd.work->stage_k;
   V.resize(4);
   Acc.resize(4);
   K.resize(4);
-  sd.ode_q0 = sd.q;
-  sd.ode_v0 = sd.v;
-  sd.q_tmp.resize(sim.model.nq);
-  sd.ode_q3.resize(sim.model.nq);
-  const Eigen::VectorXd& q0 = sd.ode_q0;
-  const Eigen::VectorXd& v0 = sd.ode_v0;
+  sd.work->ode_q0 = sd.q;
+  sd.work->ode_v0 = sd.v;
+  sd.work->q_tmp.resize(sim.model.nq);
+  sd.work->ode_q3.resize(sim.model.nq);
+  const Eigen::VectorXd& q0 = sd.work->ode_q0;
+  const Eigen::VectorXd& v0 = sd.work->ode_v0;
   for (int attempt = 0;; ++attempt) {
     if (h < s.min_dt)
       throw std::runtime_error("adaptive integration: step size fell below min_dt at t = " + std::to_string(sd.t));
@@ -219,36 +219,36 @@ void integrateAdaptive(const SimulatorModel& sim, SimulatorData& sd) {
     acceleration(sim, sd, q0, V[0], Acc[0]);
     K[0] = V[0];  // (Theta = 0)
     V[1] = v0 + 0.5 * h * Acc[0];
-    sd.ode_theta = 0.5 * h * K[0];
-    pinocchio::integrate(sim.model, q0, sd.ode_theta, sd.q_tmp);
-    acceleration(sim, sd, sd.q_tmp, V[1], Acc[1]);
-    configurationRate(sim, sd, sd.ode_theta, V[1], K[1]);
+    sd.work->ode_theta = 0.5 * h * K[0];
+    pinocchio::integrate(sim.model, q0, sd.work->ode_theta, sd.work->q_tmp);
+    acceleration(sim, sd, sd.work->q_tmp, V[1], Acc[1]);
+    configurationRate(sim, sd, sd.work->ode_theta, V[1], K[1]);
     V[2] = v0 + 0.75 * h * Acc[1];
-    sd.ode_theta = 0.75 * h * K[1];
-    pinocchio::integrate(sim.model, q0, sd.ode_theta, sd.q_tmp);
-    acceleration(sim, sd, sd.q_tmp, V[2], Acc[2]);
-    configurationRate(sim, sd, sd.ode_theta, V[2], K[2]);
-    sd.ode_theta3 = h * ((2.0 / 9.0) * K[0] + (1.0 / 3.0) * K[1] + (4.0 / 9.0) * K[2]);
-    sd.ode_v3 = v0 + h * ((2.0 / 9.0) * Acc[0] + (1.0 / 3.0) * Acc[1] + (4.0 / 9.0) * Acc[2]);
-    pinocchio::integrate(sim.model, q0, sd.ode_theta3, sd.ode_q3);
-    V[3] = sd.ode_v3;
-    acceleration(sim, sd, sd.ode_q3, V[3], Acc[3]);
-    configurationRate(sim, sd, sd.ode_theta3, V[3], K[3]);
-    sd.ode_theta2 = h * ((7.0 / 24.0) * K[0] + 0.25 * K[1] + (1.0 / 3.0) * K[2] + 0.125 * K[3]);
-    sd.ode_v2 = v0 + h * ((7.0 / 24.0) * Acc[0] + 0.25 * Acc[1] + (1.0 / 3.0) * Acc[2] + 0.125 * Acc[3]);
+    sd.work->ode_theta = 0.75 * h * K[1];
+    pinocchio::integrate(sim.model, q0, sd.work->ode_theta, sd.work->q_tmp);
+    acceleration(sim, sd, sd.work->q_tmp, V[2], Acc[2]);
+    configurationRate(sim, sd, sd.work->ode_theta, V[2], K[2]);
+    sd.work->ode_theta3 = h * ((2.0 / 9.0) * K[0] + (1.0 / 3.0) * K[1] + (4.0 / 9.0) * K[2]);
+    sd.work->ode_v3 = v0 + h * ((2.0 / 9.0) * Acc[0] + (1.0 / 3.0) * Acc[1] + (4.0 / 9.0) * Acc[2]);
+    pinocchio::integrate(sim.model, q0, sd.work->ode_theta3, sd.work->ode_q3);
+    V[3] = sd.work->ode_v3;
+    acceleration(sim, sd, sd.work->ode_q3, V[3], Acc[3]);
+    configurationRate(sim, sd, sd.work->ode_theta3, V[3], K[3]);
+    sd.work->ode_theta2 = h * ((7.0 / 24.0) * K[0] + 0.25 * K[1] + (1.0 / 3.0) * K[2] + 0.125 * K[3]);
+    sd.work->ode_v2 = v0 + h * ((7.0 / 24.0) * Acc[0] + 0.25 * Acc[1] + (1.0 / 3.0) * Acc[2] + 0.125 * Acc[3]);
     // error per unit of the state, mixed absolute/relative
-    const double eq = ((sd.ode_theta3 - sd.ode_theta2).array() /
-                       (s.ode_tolerance * (1.0 + sd.ode_theta3.array().abs()))).abs().maxCoeff();
+    const double eq = ((sd.work->ode_theta3 - sd.work->ode_theta2).array() /
+                       (s.ode_tolerance * (1.0 + sd.work->ode_theta3.array().abs()))).abs().maxCoeff();
     const double ev =
-        ((sd.ode_v3 - sd.ode_v2).array() / (s.ode_tolerance * (1.0 + sd.ode_v3.array().abs()))).abs().maxCoeff();
+        ((sd.work->ode_v3 - sd.work->ode_v2).array() / (s.ode_tolerance * (1.0 + sd.work->ode_v3.array().abs()))).abs().maxCoeff();
     const double err = std::max(eq, ev);
     const double factor = err > 0.0 ? std::clamp(0.9 * std::pow(err, -1.0 / 3.0), 0.2, 5.0) : 5.0;
     if (err <= 1.0 && std::isfinite(err)) {
-      sd.q = sd.ode_q3;
-      sd.v = sd.ode_v3;
+      sd.q = sd.work->ode_q3;
+      sd.v = sd.work->ode_v3;
       sd.t += h;
-      sd.last_dt = h;
-      sd.next_dt = std::min(s.dt, h * factor);
+      sd.out.last_dt = h;
+      sd.out.next_dt = std::min(s.dt, h * factor);
       return;
     }
     h *= std::isfinite(err) ? factor : 0.2;

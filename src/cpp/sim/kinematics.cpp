@@ -19,7 +19,7 @@ void forwardKinematics(const SimulatorModel& sim, SimulatorData& sd, const Eigen
   // the centre of mass and its Jacobian.)
   for (std::size_t s = 0; s < sim.systems.size(); ++s) {
     const SystemModel& part = sim.systems[s];
-    SystemWork& w = sd.parts[s];
+    SystemWork& w = sd.work->parts[s];
     gatherQ(part, q, w.q);
     gatherV(part, v, w.v);
     if (part.free_body) {
@@ -119,10 +119,10 @@ void addPointRows(const SystemModel& part, SystemWork& w, pinocchio::JointIndex 
 // Rows [row, row + k) of the problem belong to the parts the block touches.
 void reserveRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& b, Eigen::Index row, int k) {
   const std::array<int, 2> parts = blockParts(sim, b);
-  if (parts[0] >= 0 && parts[1] >= 0) sd.parts_share_rows = true;
+  if (parts[0] >= 0 && parts[1] >= 0) sd.work->parts_share_rows = true;
   for (int s : parts)
     if (s >= 0)
-      for (int r = 0; r < k; ++r) sd.parts[s].rows.push_back(static_cast<int>(row + r));
+      for (int r = 0; r < k; ++r) sd.work->parts[s].rows.push_back(static_cast<int>(row + r));
 }
 
 // The block's next k rows in each part it touches: T (rows 0..k-1) times the relative point
@@ -136,7 +136,7 @@ void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& 
     local_rows[p] = -1;
     if (s < 0) continue;
     const pinocchio::Model& m = sim.systems[s].model;
-    SystemWork& w = sd.parts[s];
+    SystemWork& w = sd.work->parts[s];
     if (sim.systems[s].free_body) {
       // One free flyer (v = (v, omega) in its own frame): a material point r (joint frame) moves at
       // R (v + omega x r) = R v - [R r]x R omega. (Pinocchio's frame Jacobian, 6 x 6 from the joint
@@ -145,14 +145,14 @@ void writeRows(const SimulatorModel& sim, SimulatorData& sd, const BlockBodies& 
       Eigen::Matrix<double, 3, 6> Jrel = Eigen::Matrix<double, 3, 6>::Zero();
       if (partOf(sim, b.plus) == s) addFreeBodyPointJacobian(R, at_plus, 1.0, Jrel);
       if (partOf(sim, b.minus) == s) addFreeBodyPointJacobian(R, at_minus, -1.0, Jrel);
-      const int lr = sd.part_fill[s];
-      sd.part_fill[s] += k;
+      const int lr = sd.work->part_fill[s];
+      sd.work->part_fill[s] += k;
       for (int r = 0; r < k; ++r) w.J.row(lr + r) = T.row(r) * Jrel;  // (T's rows past k unset)
       local_rows[p] = lr;
       continue;
     }
-    const int lr = sd.part_fill[s];
-    sd.part_fill[s] += k;
+    const int lr = sd.work->part_fill[s];
+    sd.work->part_fill[s] += k;
     for (int r = 0; r < k; ++r) w.J.row(lr + r).setZero();
     if (partOf(sim, b.plus) == s) addPointRows(sim.systems[s], w, sim.joint_local[b.plus], at_plus, T, k, lr, 1.0);
     if (partOf(sim, b.minus) == s) addPointRows(sim.systems[s], w, sim.joint_local[b.minus], at_minus, T, k, lr, -1.0);
@@ -168,14 +168,14 @@ Eigen::Vector3d pointAcceleration(const SimulatorModel& sim, SimulatorData& sd, 
   const int s = sim.joint_system[j];
   if (sim.systems[s].free_body) {
     // a free flyer at zero acceleration: R (omega x (v + omega x r)), its velocity in its own frame
-    const pinocchio::Motion& vj = sd.parts[s].data.v[1];
+    const pinocchio::Motion& vj = sd.work->parts[s].data.v[1];
     const Eigen::Vector3d v_point = vj.linear() + vj.angular().cross(at);
-    return sd.parts[s].data.oMi[1].rotation() * vj.angular().cross(v_point);
+    return sd.work->parts[s].data.oMi[1].rotation() * vj.angular().cross(v_point);
   }
   // a robot body: from its world-frame velocity (v_o, omega) and bias acceleration (a_o, alpha)
   // (stage 1), the material point p moves at v_o + omega x p and accelerates at
   // a_o + alpha x p + omega x (v_o + omega x p)
-  const pinocchio::Data& data = sd.parts[s].data;
+  const pinocchio::Data& data = sd.work->parts[s].data;
   const pinocchio::JointIndex local = sim.joint_local[j];
   const Eigen::Vector3d p = data.oMi[local].act(at);
   const pinocchio::Motion &ov = data.ov[local], &oa = data.oa[local];
@@ -186,7 +186,7 @@ Eigen::Vector3d pointAcceleration(const SimulatorModel& sim, SimulatorData& sd, 
 // Row `local_row` of part s's J times the part's entries of the world vector x.
 double partRowDot(const SimulatorModel& sim, const SimulatorData& sd, int s, int local_row, const Eigen::VectorXd& x) {
   const SystemModel& part = sim.systems[s];
-  const SystemWork& w = sd.parts[s];
+  const SystemWork& w = sd.work->parts[s];
   if (part.v_start >= 0) return w.J.row(local_row).dot(x.segment(part.v_start, w.J.cols()));
   double sum = 0.0;
   for (Eigen::Index k = 0; k < w.J.cols(); ++k) sum += w.J(local_row, k) * x[part.v_index[k]];
@@ -198,64 +198,64 @@ double partRowDot(const SimulatorModel& sim, const SimulatorData& sd, int s, int
 void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v) {
   const pinocchio::Model& model = sim.model;
   // Which rows each part holds (a contact between two parts: both), then the parts' J.
-  for (SystemWork& w : sd.parts) w.rows.clear();
-  sd.parts_share_rows = false;
+  for (SystemWork& w : sd.work->parts) w.rows.clear();
+  sd.work->parts_share_rows = false;
   Eigen::Index rows = 0;
-  for (int i : sd.active) {
-    reserveRows(sim, sd, contactBodies(sim, i), rows, sd.candidate_rows[i]);
-    rows += sd.candidate_rows[i];
+  for (int i : sd.out.active) {
+    reserveRows(sim, sd, contactBodies(sim, i), rows, sd.out.candidate_rows[i]);
+    rows += sd.out.candidate_rows[i];
   }
   for (const PointAnchor& a : sim.anchors) {
     reserveRows(sim, sd, anchorBodies(sim, a), rows, 3);
     rows += 3;
   }
-  sd.rows = rows;
-  for (std::size_t s = 0; s < sd.parts.size(); ++s) {
-    SystemWork& w = sd.parts[s];
+  sd.out.rows = rows;
+  for (std::size_t s = 0; s < sd.work->parts.size(); ++s) {
+    SystemWork& w = sd.work->parts[s];
     const auto n = static_cast<Eigen::Index>(w.rows.size());
     if (w.J.rows() != n) w.J.resize(n, sim.systems[s].model.nv);  // allocation only when the active set changes
-    sd.part_fill[s] = 0;
+    sd.work->part_fill[s] = 0;
   }
-  if (sd.b.size() != rows) {
-    sd.b.resize(rows);
-    sd.drift.resize(rows);
-    sd.position_error.resize(rows);
-    sd.tangent_row.resize(rows);
+  if (sd.out.b.size() != rows) {
+    sd.out.b.resize(rows);
+    sd.out.drift.resize(rows);
+    sd.out.position_error.resize(rows);
+    sd.out.tangent_row.resize(rows);
   }
-  sd.position_error.setZero();
-  sd.tangent_row.setZero();
+  sd.out.position_error.setZero();
+  sd.out.tangent_row.setZero();
 
   // Contact frames, Jacobians J (rows t1, t2, n), drifts J' v and gaps Psi.
-  sd.frame_turn.setZero(model.nv);
+  sd.work->frame_turn.setZero(model.nv);
   for (pinocchio::JointIndex j : sim.free_flyers) {
     const int iv = model.idx_vs[j];
-    sd.frame_turn.segment<3>(iv) = v.segment<3>(iv + 3).cross(v.segment<3>(iv));
+    sd.work->frame_turn.segment<3>(iv) = v.segment<3>(iv + 3).cross(v.segment<3>(iv));
   }
   Eigen::Matrix3d T;
   std::array<int, 2> local_rows;
   Eigen::Index row = 0;
-  sd.blocks.clear();
+  sd.work->blocks.clear();
   auto keep_block = [&](const BlockBodies& bodies, Eigen::Index first, int k, const Eigen::Vector3d& point) {
-    SimulatorData::ContactBlock block;
+    SimulatorWorkspace::ContactBlock block;
     block.plus = bodies.plus;
     block.minus = bodies.minus;
     block.row = first;
     block.k = k;
     block.T = T;
     block.point = point;
-    sd.blocks.push_back(block);
+    sd.work->blocks.push_back(block);
   };
-  for (int i : sd.active) {
+  for (int i : sd.out.active) {
     const BlockBodies bodies = contactBodies(sim, i);
-    const int k = sd.candidate_rows[i];
+    const int k = sd.out.candidate_rows[i];
     if (sim.slot_pair[i] >= 0) {
       // coal contact: relative velocity of geometry 2's material point w.r.t. geometry 1's
-      const Eigen::Vector3d p = sd.slot_point.col(i), n = sd.slot_normal.col(i);
+      const Eigen::Vector3d p = sd.out.slot_point.col(i), n = sd.out.slot_normal.col(i);
       const Eigen::Vector3d at_plus = jointPlacement(sim, sd, bodies.plus).actInv(p);
       const Eigen::Vector3d at_minus = jointPlacement(sim, sd, bodies.minus).actInv(p);
       if (k == 3) {  // else frictionless (or mu = 0): the normal row only
-        T.row(0) = sd.slot_t1.col(i).transpose();
-        T.row(1) = sd.slot_t2.col(i).transpose();
+        T.row(0) = sd.out.slot_t1.col(i).transpose();
+        T.row(1) = sd.out.slot_t2.col(i).transpose();
       }
       T.row(k - 1) = n.transpose();
       writeRows(sim, sd, bodies, at_plus, at_minus, T, k, local_rows);
@@ -270,18 +270,18 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
       for (int r = 0; r < k; ++r) {
         double drift = 0.0;
         for (int p = 0; p < 2; ++p)
-          if (parts[p] >= 0) drift += partRowDot(sim, sd, parts[p], local_rows[p] + r, sd.frame_turn);
-        sd.drift[row + r] = drift;
-        sd.tangent_row[row + r] = r + 1 < k ? 1.0 : 0.0;
+          if (parts[p] >= 0) drift += partRowDot(sim, sd, parts[p], local_rows[p] + r, sd.work->frame_turn);
+        sd.out.drift[row + r] = drift;
+        sd.out.tangent_row[row + r] = r + 1 < k ? 1.0 : 0.0;
       }
-      sd.position_error[row + k - 1] = sd.gaps[i];
+      sd.out.position_error[row + k - 1] = sd.out.gaps[i];
       row += k;
       continue;
     }
     const SphereContact& c = sim.contacts[i];
     const pinocchio::Frame& f = model.frames[c.frame];
-    const Eigen::Vector3d n = sd.plane_normal.col(c.halfspace);
-    const Eigen::Vector3d t1 = sd.plane_t1.col(c.halfspace), t2 = sd.plane_t2.col(c.halfspace);
+    const Eigen::Vector3d n = sd.work->plane_normal.col(c.halfspace);
+    const Eigen::Vector3d t1 = sd.work->plane_t1.col(c.halfspace), t2 = sd.work->plane_t2.col(c.halfspace);
     const pinocchio::SE3& oMj = jointPlacement(sim, sd, bodies.plus);
     const Eigen::Vector3d center_j = f.placement.act(c.offset);
     const Eigen::Vector3d point_w = oMj.act(center_j) - c.radius * n;
@@ -307,15 +307,15 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
                                            : pointAcceleration(sim, sd, bodies.plus, center_j) - acc_plane;
     r = 0;
     if (k >= 2) {
-      sd.drift[row + r] = t1.dot(acc_point);
-      sd.tangent_row[row + r++] = 1.0;
+      sd.out.drift[row + r] = t1.dot(acc_point);
+      sd.out.tangent_row[row + r++] = 1.0;
     }
     if (k == 3) {
-      sd.drift[row + r] = t2.dot(acc_point);
-      sd.tangent_row[row + r++] = 1.0;
+      sd.out.drift[row + r] = t2.dot(acc_point);
+      sd.out.tangent_row[row + r++] = 1.0;
     }
-    sd.drift[row + r] = n.dot(acc_center);
-    sd.position_error[row + r] = sd.gaps[i];
+    sd.out.drift[row + r] = n.dot(acc_center);
+    sd.out.position_error[row + r] = sd.out.gaps[i];
     row += k;
   }
   for (const PointAnchor& a : sim.anchors) {
@@ -332,10 +332,10 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
       at_point2 = point2_j;
     }
     writeRows(sim, sd, bodies, at_point, at_point2, Eigen::Matrix3d::Identity(), 3, local_rows);
-    sd.drift.segment<3>(row) = pointAcceleration(sim, sd, bodies.plus, at_point) -
+    sd.out.drift.segment<3>(row) = pointAcceleration(sim, sd, bodies.plus, at_point) -
                                (a.frame2 != 0 ? pointAcceleration(sim, sd, bodies.minus, at_point2)
                                               : Eigen::Vector3d::Zero());
-    sd.position_error.segment<3>(row) = jointPlacement(sim, sd, bodies.plus).act(point_j) - other;
+    sd.out.position_error.segment<3>(row) = jointPlacement(sim, sd, bodies.plus).act(point_j) - other;
     row += 3;
   }
 }

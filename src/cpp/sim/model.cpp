@@ -13,6 +13,7 @@
 
 #include "stiction/rk4_stability.hpp"
 #include "stiction/simulator.hpp"
+#include "workspace.hpp"
 
 namespace stiction {
 
@@ -274,10 +275,8 @@ SystemWork::SystemWork(const SystemModel& s)
   trig.assign(3 * static_cast<std::size_t>((revolute + 3) / 4 * 4), 0.0);
 }
 
-SimulatorData::SimulatorData(const SimulatorModel& sim)
-    : q(pinocchio::neutral(sim.model)),
-      v(Eigen::VectorXd::Zero(sim.model.nv)),
-      geometry_data(sim.geometry),
+SimulatorWorkspace::SimulatorWorkspace(const SimulatorModel& sim)
+    : geometry_data(sim.geometry),
       solver(makeSolver(sim.settings.solver)) {
   parts.reserve(sim.systems.size());
   for (const SystemModel& s : sim.systems) parts.emplace_back(s);
@@ -285,6 +284,22 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
   FormulationSettings fs = sim.settings.formulation_settings;
   fs.exact_solver = sim.settings.solver;
   solver = makeFormulation(sim.settings.formulation, fs);
+  for (const GeometryPairContact& g : sim.pairs) {
+    coal::CollisionRequest& req = geometry_data.collisionRequests[g.pair];
+    req.num_max_contacts = static_cast<size_t>(g.max_contacts);
+    req.security_margin = sim.settings.activation_distance;
+    req.enable_contact = true;
+  }
+  const int nv = sim.model.nv;
+  zero_nv = Eigen::VectorXd::Zero(nv);
+  v_free.resize(nv);
+  dv.resize(nv);
+}
+
+SimulatorData::SimulatorData(const SimulatorModel& sim)
+    : q(pinocchio::neutral(sim.model)),
+      v(Eigen::VectorXd::Zero(sim.model.nv)),
+      work(std::make_unique<SimulatorWorkspace>(sim)) {
   const int nv = sim.model.nv;
   control.kp = Eigen::VectorXd::Zero(nv);
   control.kd = Eigen::VectorXd::Zero(nv);
@@ -292,35 +307,28 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
   control.v_target = Eigen::VectorXd::Zero(nv);
   control.tau_ff = Eigen::VectorXd::Zero(nv);
   const int nc = sim.numCandidates();
-  gaps = Eigen::VectorXd::Zero(nc);
-  slot_point = slot_normal = slot_t1 = slot_t2 = Eigen::Matrix3Xd::Zero(3, nc);
-  for (const GeometryPairContact& g : sim.pairs) {
-    coal::CollisionRequest& req = geometry_data.collisionRequests[g.pair];
-    req.num_max_contacts = static_cast<size_t>(g.max_contacts);
-    req.security_margin = sim.settings.activation_distance;
-    req.enable_contact = true;
-  }
-  tau.resize(nv);
-  nle.resize(nv);
-  zero_nv = Eigen::VectorXd::Zero(nv);
-  v_free.resize(nv);
-  dv.resize(nv);
-  candidate_lambda = Eigen::MatrixXd::Zero(3, nc);
-  have_candidate_lambda.assign(nc, false);
-  anchor_lambda = Eigen::MatrixXd::Zero(3, sim.anchors.size());
-  candidate_spring = Eigen::MatrixXd::Zero(3, nc);
-  candidate_velocity = Eigen::MatrixXd::Zero(3, nc);
-  candidate_states.assign(nc, ContactState::kOpen);
-  candidate_rows.assign(nc, 0);
+  out.gaps = Eigen::VectorXd::Zero(nc);
+  out.slot_point = out.slot_normal = out.slot_t1 = out.slot_t2 = Eigen::Matrix3Xd::Zero(3, nc);
+  out.tau.resize(nv);
+  out.nle.resize(nv);
+  out.candidate_lambda = Eigen::MatrixXd::Zero(3, nc);
+  out.have_candidate_lambda.assign(nc, false);
+  out.anchor_lambda = Eigen::MatrixXd::Zero(3, sim.anchors.size());
+  out.candidate_spring = Eigen::MatrixXd::Zero(3, nc);
+  out.candidate_velocity = Eigen::MatrixXd::Zero(3, nc);
+  out.candidate_states.assign(nc, ContactState::kOpen);
+  out.candidate_rows.assign(nc, 0);
 }
+
+SimulatorData::~SimulatorData() = default;
 
 }  // namespace stiction
 
 namespace stiction {
 
 Eigen::MatrixXd denseJacobian(const SimulatorData& sd) {
-  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(sd.rows, sd.v.size());
-  for (const SystemWork& w : sd.parts)
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(sd.out.rows, sd.v.size());
+  for (const SystemWork& w : sd.work->parts)
     for (Eigen::Index r = 0; r < static_cast<Eigen::Index>(w.rows.size()); ++r)
       for (Eigen::Index k = 0; k < w.J.cols(); ++k) J(w.rows[r], w.v_index[k]) += w.J(r, k);
   return J;
@@ -328,7 +336,7 @@ Eigen::MatrixXd denseJacobian(const SimulatorData& sd) {
 
 Eigen::MatrixXd denseMassMatrix(const SimulatorData& sd) {
   Eigen::MatrixXd M = Eigen::MatrixXd::Zero(sd.v.size(), sd.v.size());
-  for (const SystemWork& w : sd.parts) {
+  for (const SystemWork& w : sd.work->parts) {
     // crba fills the upper triangle
     const auto n = static_cast<Eigen::Index>(w.v_index.size());
     for (Eigen::Index c = 0; c < n; ++c)
@@ -339,9 +347,9 @@ Eigen::MatrixXd denseMassMatrix(const SimulatorData& sd) {
 }
 
 Eigen::MatrixXd denseDelassus(const SimulatorData& sd) {
-  if (sd.sparse)
-    return Eigen::MatrixXd(sd.a_in_operator && sd.sparse_delassus ? sd.sparse_delassus->sparseMatrix() : sd.A_sparse);
-  return sd.A;
+  if (sd.out.sparse)
+    return Eigen::MatrixXd(sd.work->a_in_operator && sd.work->sparse_delassus ? sd.work->sparse_delassus->sparseMatrix() : sd.out.A_sparse);
+  return sd.out.A;
 }
 
 }  // namespace stiction

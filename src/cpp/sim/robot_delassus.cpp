@@ -53,7 +53,7 @@ int blockChainEnd(const pinocchio::Data& data, int a, int b) {
 // block's bodies are not on one root path. Kept while the active contacts are the same.
 bool planChains(const SimulatorModel& sim, const SimulatorData& sd, const pinocchio::Data& data,
                 RobotOperatorPlan& plan) {
-  if (plan.valid && plan.active == sd.active && plan.anchors == sim.anchors.size()) return true;
+  if (plan.valid && plan.active == sd.out.active && plan.anchors == sim.anchors.size()) return true;
   plan.valid = false;
   plan.blocks.clear();
   plan.chain.clear();
@@ -71,8 +71,8 @@ bool planChains(const SimulatorModel& sim, const SimulatorData& sd, const pinocc
     row += k;
     return true;
   };
-  if (sd.blocks.size() != sd.active.size()) return false;
-  for (const SimulatorData::ContactBlock& c : sd.blocks)
+  if (sd.work->blocks.size() != sd.out.active.size()) return false;
+  for (const SimulatorWorkspace::ContactBlock& c : sd.work->blocks)
     if (!add(c.k, blockChainEnd(data, deepestCoordinate(sim, c.plus), deepestCoordinate(sim, c.minus)))) return false;
   for (const PointAnchor& a : sim.anchors) {
     const int end = blockChainEnd(data, deepestCoordinate(sim, sim.model.frames[a.frame].parentJoint),
@@ -88,7 +88,7 @@ bool planChains(const SimulatorModel& sim, const SimulatorData& sd, const pinocc
       while (p < bf.length && p < bg.length && plan.chain[bf.start + p] == plan.chain[bg.start + p]) ++p;
       plan.prefix[f * blocks + g] = p;
     }
-  plan.active = sd.active;
+  plan.active = sd.out.active;
   plan.anchors = sim.anchors.size();
   plan.valid = true;
   return true;
@@ -248,7 +248,7 @@ __attribute__((target("avx2,fma"))) bool chainOperatorAvx2(const double* J, long
 }  // namespace
 
 bool robotOperator(const SimulatorModel& sim, SimulatorData& sd) {
-  SystemWork& w = sd.parts[0];
+  SystemWork& w = sd.work->parts[0];
   const pinocchio::Data& data = w.data;
   RobotOperatorPlan& plan = w.robot_plan;
   if (!planChains(sim, sd, data, plan)) return false;
@@ -256,17 +256,17 @@ bool robotOperator(const SimulatorModel& sim, SimulatorData& sd) {
   plan.scale.resize(static_cast<std::size_t>(nv));
   for (Eigen::Index i = 0; i < nv; ++i) plan.scale[static_cast<std::size_t>(i)] = std::sqrt(data.Dinv[i]);
   plan.Y.resize(4 * plan.chain.size());
-  sd.A.resize(n, n);
-  sd.a_known_finite = false;
+  sd.out.A.resize(n, n);
+  sd.work->a_known_finite = false;
 #ifdef STICTION_X86_KERNELS
   if (vectorKernels()) {
-    sd.a_known_finite = chainOperatorAvx2(w.J.data(), n, data.U.data(), data.U.rows(), plan.scale.data(),
+    sd.work->a_known_finite = chainOperatorAvx2(w.J.data(), n, data.U.data(), data.U.rows(), plan.scale.data(),
                                           plan.blocks.data(), static_cast<long>(plan.blocks.size()), plan.chain.data(),
-                                          plan.prefix.data(), plan.Y.data(), sd.A.data());
+                                          plan.prefix.data(), plan.Y.data(), sd.out.A.data());
     return true;
   }
 #endif
-  chainOperatorPortable(data, w, plan, sd.A.data());
+  chainOperatorPortable(data, w, plan, sd.out.A.data());
   return true;
 }
 

@@ -99,29 +99,29 @@ void Recording::record(const SimulatorModel& sim, const SimulatorData& d, bool i
   q.row(r) = d.q.transpose();
   v.row(r) = d.v.transpose();
   for (int i = 0; i < nc; ++i) {
-    contact_velocity.block<1, 3>(r, 3 * i) = d.candidate_velocity.col(i).transpose();
-    rows(r, i) = d.candidate_rows[i];
+    contact_velocity.block<1, 3>(r, 3 * i) = d.out.candidate_velocity.col(i).transpose();
+    rows(r, i) = d.out.candidate_rows[i];
     if (initial) {  // no step led here: no force, no state of a solve
       lam.block<1, 3>(r, 3 * i).setConstant(kNaN);
       states(r, i) = kNaN;
     } else {
-      lam.block<1, 3>(r, 3 * i) = d.candidate_lambda.col(i).transpose();
-      states(r, i) = static_cast<int>(d.candidate_states[i]);
+      lam.block<1, 3>(r, 3 * i) = d.out.candidate_lambda.col(i).transpose();
+      states(r, i) = static_cast<int>(d.out.candidate_states[i]);
     }
   }
-  gaps.row(r) = d.gaps.transpose();
+  gaps.row(r) = d.out.gaps.transpose();
   for (std::size_t a = 0; a < sim.anchors.size(); ++a) {
     if (initial)
       anchor_lam.block<1, 3>(r, 3 * a).setConstant(kNaN);
     else
-      anchor_lam.block<1, 3>(r, 3 * a) = d.anchor_lambda.col(a).transpose();
+      anchor_lam.block<1, 3>(r, 3 * a) = d.out.anchor_lambda.col(a).transpose();
   }
-  residual[r] = d.max_residual_step;
-  iterations[r] = d.iterations_step;
-  converged[r] = d.all_converged_step ? 1.0 : 0.0;
-  dt[r] = d.last_dt;
-  timings.row(r) << d.timings.kinematics, d.timings.delassus, d.timings.solve, d.timings.integrate,
-      d.timings.total;
+  residual[r] = d.out.max_residual_step;
+  iterations[r] = d.out.iterations_step;
+  converged[r] = d.out.all_converged_step ? 1.0 : 0.0;
+  dt[r] = d.out.last_dt;
+  timings.row(r) << d.out.timings.kinematics, d.out.timings.delassus, d.out.timings.solve, d.out.timings.integrate,
+      d.out.timings.total;
 }
 
 namespace {

@@ -27,6 +27,7 @@
 #include "stiction/clock.hpp"
 #include "stiction/simulator.hpp"
 #include "stiction/thresholds.hpp"
+#include "workspace.hpp"
 
 namespace stiction {
 namespace stages {
@@ -34,7 +35,7 @@ namespace stages {
 // ---- stage functions
 
 /// 1. Forward kinematics at (q, v) with zero acceleration (the classical accelerations it
-/// leaves are J' v) and the world-frame joint Jacobians, per part (sd.parts[s].data).
+/// leaves are J' v) and the world-frame joint Jacobians, per part (sd.work->parts[s].data).
 void forwardKinematics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                        const Eigen::VectorXd& v);
 /// Stage 1 for a robot part whose joints treeOf describes (tree.cpp), in one pass: oMi, the
@@ -74,11 +75,11 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
                   const Eigen::VectorXd& v, double implicit_pd_step);
 
 /// 4b. A = J M^-1 J^T (eq. 22) = sum over parts of W_s^T W_s, W_s = D_s^-1/2 U_s^-1 J_s^T:
-/// symmetric by construction; dense, or sparse (sd.sparse) when many parts share more than
+/// symmetric by construction; dense, or sparse (sd.out.sparse) when many parts share more than
 /// kSparseDelassusRows rows and at most kSparseDelassusDensity of A is nonzero (thresholds.hpp).
 void delassusOperator(const SimulatorModel& sim, SimulatorData& sd);
 
-/// 4b for a problem that is one robot's alone (robot_delassus.cpp): sd.A = J M^-1 J^T from the
+/// 4b for a problem that is one robot's alone (robot_delassus.cpp): sd.out.A = J M^-1 J^T from the
 /// chains of the tree, exactly symmetric. False (nothing done) when some block's columns are not
 /// on one root path (a contact between two of the robot's limbs): the general path then.
 bool robotOperator(const SimulatorModel& sim, SimulatorData& sd);
@@ -90,11 +91,11 @@ void rightHandSide(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Ve
 
 /// b's part that no lambda can produce (in J's left null space over a set of contacts between the
 /// same two bodies with more rows than their relative twist's 6) removed when it exceeds a tenth
-/// of the solver's tolerance (solveContacts, for a step that missed it); sd.inconsistent_groups
+/// of the solver's tolerance (solveContacts, for a step that missed it); sd.out.inconsistent_groups
 /// counts the sets changed.
 void projectRedundantSets(const SimulatorModel& sim, SimulatorData& sd);
 
-/// 5. Solve eq. 65 for sd.A, sd.b (scaled by `scale`: h for impulses) with the model's
+/// 5. Solve eq. 65 for sd.out.A, sd.out.b (scaled by `scale`: h for impulses) with the model's
 /// formulation, warm-started from the previous lambda of the same candidates; per-candidate
 /// forces and states. Throws when the problem has no (resolvable) solution.
 void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale);
@@ -145,7 +146,7 @@ inline void scatterV(const SystemModel& s, const Eigen::VectorXd& local, Eigen::
 /// True when the problem is one part's alone, its rows the problem's rows in order and its
 /// coordinates the world's (a robot on the ground): the products need no gather or scatter.
 inline bool wholeWorldPart(const SimulatorModel& sim, const SimulatorData& sd) {
-  return sd.parts.size() == 1 && static_cast<Eigen::Index>(sd.parts[0].rows.size()) == sd.rows &&
+  return sd.work->parts.size() == 1 && static_cast<Eigen::Index>(sd.work->parts[0].rows.size()) == sd.out.rows &&
          sim.systems[0].v_start == 0;
 }
 
@@ -154,10 +155,10 @@ inline const pinocchio::SE3& jointPlacement(const SimulatorModel& sim, const Sim
                                             pinocchio::JointIndex j) {
   static const pinocchio::SE3 kIdentity = pinocchio::SE3::Identity();
   if (j == 0) return kIdentity;
-  return sd.parts[sim.joint_system[j]].data.oMi[sim.joint_local[j]];
+  return sd.work->parts[sim.joint_system[j]].data.oMi[sim.joint_local[j]];
 }
 
-/// y = J x: the problem's rows of a world velocity x (y sized to sd.rows).
+/// y = J x: the problem's rows of a world velocity x (y sized to sd.out.rows).
 void multiplyJacobian(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& x, Eigen::VectorXd& y);
 
 /// dv = M^-1 J^T lambda in world coordinates, from each part's factor M = U D U^T.

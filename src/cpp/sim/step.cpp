@@ -84,12 +84,12 @@ void checkControl(const SimulatorData& sd) {
 // Statistics to zero, the state's size and the control inputs checked, and at a trajectory's start
 // (the first step, or after q, v or t were assigned) the blow-up check's reference.
 bool beginStep(const SimulatorModel& sim, SimulatorData& sd) {
-  sd.timings = StepTimings{};
-  sd.rhs_evaluations = 0;
-  sd.solves = 0;
-  sd.iterations_step = 0;
-  sd.max_residual_step = 0.0;
-  sd.all_converged_step = true;
+  sd.out.timings = StepTimings{};
+  sd.out.rhs_evaluations = 0;
+  sd.out.solves = 0;
+  sd.out.iterations_step = 0;
+  sd.out.max_residual_step = 0.0;
+  sd.out.all_converged_step = true;
   if (sd.q.size() != sim.model.nq || sd.v.size() != sim.model.nv)
     throw std::invalid_argument("state size: q needs nq = " + std::to_string(sim.model.nq) +
                                 " entries and v nv = " + std::to_string(sim.model.nv));
@@ -136,11 +136,11 @@ void checkBlowUp(const SimulatorModel& sim, const SimulatorData& sd) {
   }
   const double depth_limit =
       std::max(0.1, 10.0 * sim.settings.activation_distance) + 10.0 * sd.reference_penetration;
-  for (int i : sd.active) {
-    if (-sd.gaps[i] > depth_limit) {
+  for (int i : sd.out.active) {
+    if (-sd.out.gaps[i] > depth_limit) {
       const std::string name = sim.slot_pair[i] < 0 ? sim.contacts[i].name : sim.pairs[sim.slot_pair[i]].name;
       std::ostringstream os;
-      os << "simulation diverged (blow-up) at t = " << sd.t << ": contact '" << name << "' penetrates " << -sd.gaps[i]
+      os << "simulation diverged (blow-up) at t = " << sd.t << ": contact '" << name << "' penetrates " << -sd.out.gaps[i]
          << " m, deeper than the bound " << depth_limit << " m" << hint;
       throw std::runtime_error(os.str());
     }
@@ -149,12 +149,12 @@ void checkBlowUp(const SimulatorModel& sim, const SimulatorData& sd) {
 
 // candidate_velocity from row_velocity (rows t1, t2, n per active candidate; 0 for the others).
 void scatterRowVelocities(SimulatorData& sd) {
-  sd.candidate_velocity.setZero();
-  if (sd.rows == 0) return;
+  sd.out.candidate_velocity.setZero();
+  if (sd.out.rows == 0) return;
   Eigen::Index row = 0;
-  for (int i : sd.active) {
-    sd.candidate_velocity.col(i) = toSlots(sd.row_velocity.data() + row, sd.candidate_rows[i]);
-    row += sd.candidate_rows[i];
+  for (int i : sd.out.active) {
+    sd.out.candidate_velocity.col(i) = toSlots(sd.work->row_velocity.data() + row, sd.out.candidate_rows[i]);
+    row += sd.out.candidate_rows[i];
   }
 }
 
@@ -164,10 +164,10 @@ void scatterRowVelocities(SimulatorData& sd) {
 void endStep(const SimulatorModel& sim, SimulatorData& sd, bool first) {
   checkState(sd);
   if (first)
-    for (int i : sd.active) sd.reference_penetration = std::max(sd.reference_penetration, -sd.gaps[i]);
+    for (int i : sd.out.active) sd.reference_penetration = std::max(sd.reference_penetration, -sd.out.gaps[i]);
   checkBlowUp(sim, sd);
-  if (sd.rows > 0 && sim.settings.mode != IntegrationMode::kTimeStepping)
-    multiplyJacobian(sim, sd, sd.v, sd.row_velocity);
+  if (sd.out.rows > 0 && sim.settings.mode != IntegrationMode::kTimeStepping)
+    multiplyJacobian(sim, sd, sd.v, sd.work->row_velocity);
   scatterRowVelocities(sd);
 }
 
@@ -179,11 +179,11 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
   forwardKinematics(sim, sd, q, v);
   detectContacts(sim, sd);
   contactJacobians(sim, sd, v);
-  watch.lap(sd.timings.kinematics);
+  watch.lap(sd.out.timings.kinematics);
   freeDynamics(sim, sd, q, v, implicit_pd_step);
   delassusOperator(sim, sd);
   rightHandSide(sim, sd, v, delta, zeta);
-  watch.lap(sd.timings.delassus);
+  watch.lap(sd.out.timings.delassus);
 }
 
 void contactsAtState(const SimulatorModel& sim, SimulatorData& sd) {
@@ -194,18 +194,18 @@ void contactsAtState(const SimulatorModel& sim, SimulatorData& sd) {
   std::vector<std::pair<coal::Vec3s, coal::support_func_guess_t>> guesses;
   guesses.reserve(sim.pairs.size());
   for (const GeometryPairContact& g : sim.pairs) {
-    const coal::CollisionRequest& req = sd.geometry_data.collisionRequests[g.pair];
+    const coal::CollisionRequest& req = sd.work->geometry_data.collisionRequests[g.pair];
     guesses.emplace_back(req.cached_gjk_guess, req.cached_support_func_guess);
   }
   forwardKinematics(sim, sd, sd.q, sd.v);
   detectContacts(sim, sd);
   contactJacobians(sim, sd, sd.v);
   for (std::size_t p = 0; p < sim.pairs.size(); ++p) {
-    coal::CollisionRequest& req = sd.geometry_data.collisionRequests[sim.pairs[p].pair];
+    coal::CollisionRequest& req = sd.work->geometry_data.collisionRequests[sim.pairs[p].pair];
     req.cached_gjk_guess = guesses[p].first;
     req.cached_support_func_guess = guesses[p].second;
   }
-  if (sd.rows > 0) multiplyJacobian(sim, sd, sd.v, sd.row_velocity);
+  if (sd.out.rows > 0) multiplyJacobian(sim, sd, sd.v, sd.work->row_velocity);
   scatterRowVelocities(sd);
 }
 
@@ -219,15 +219,15 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
       forwardKinematics(sim, sd, sd.q, sd.v);  // placements, J' v, joint Jacobians
       detectContacts(sim, sd);                 // gaps, the active set
       contactJacobians(sim, sd, sd.v);         // J, drift J' v, Psi
-      watch.lap(sd.timings.kinematics);
+      watch.lap(sd.out.timings.kinematics);
       freeDynamics(sim, sd, sd.q, sd.v, sim.settings.implicit_pd ? h : 0.0);  // M = U D U^T, M^-1 (tau - nle)
       delassusOperator(sim, sd);                                               // A = J M^-1 J^T
       rightHandSide(sim, sd, sd.v, h, 0.5, /*tangential_drift=*/false);        // b (eq. 27)
-      watch.lap(sd.timings.delassus);
+      watch.lap(sd.out.timings.delassus);
       solveContacts(sim, sd, h);  // A P - h b in -N(P), by the formulation
-      watch.lap(sd.timings.solve);
+      watch.lap(sd.out.timings.solve);
       integrateTimeStep(sim, sd, h);  // v+, then q+
-      watch.lap(sd.timings.integrate);
+      watch.lap(sd.out.timings.integrate);
       break;
     }
     // The relaxed DAI as an ODE: buildContactProblem and solveContacts at every RHS evaluation.
@@ -235,7 +235,7 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
     case IntegrationMode::kAdaptive: integrateAdaptive(sim, sd); break;
   }
   endStep(sim, sd, first);  // finite, not blown up; contact velocities J v
-  sd.timings.total = microseconds(start, Clock::now());
+  sd.out.timings.total = microseconds(start, Clock::now());
 }
 
 }  // namespace stiction

@@ -13,11 +13,10 @@
 //    Bogacki-Shampine 3(2) pair with error control; delta, zeta are free.
 //
 // Model/Data split as in Pinocchio: SimulatorModel is the immutable
-// description, SimulatorData the per-step workspace (sized once; a step
-// allocates only when the number of active contacts changes).
+// description, SimulatorData the state (q, v, t, control), the last step's
+// outputs (SimulatorOutputs) and a private workspace (src/cpp/sim/workspace.hpp),
+// sized once: a step allocates only when the number of active contacts changes.
 #pragma once
-
-#include <array>
 
 #include <memory>
 #include <string>
@@ -25,7 +24,6 @@
 #include <vector>
 
 #include <Eigen/SparseCore>
-#include <pinocchio/multibody/data.hpp>
 #include <pinocchio/multibody/geometry.hpp>
 #include <pinocchio/multibody/model.hpp>
 
@@ -233,121 +231,46 @@ struct StepTimings {
   double total = 0.0;
 };
 
-/// The workspace of one part: its Pinocchio Data, its coordinates, and its columns of the
-/// contact Jacobian (the rows of the contacts that touch it).
-/// One block of the lower triangle of a sparse A shared by parts (two contacts' rows, or anchors'),
-/// and where its columns and its mirror's start in the compressed storage (each column's `rows`
-/// values are consecutive there): the sum over its one or two parts s of W_s's columns
-/// [row, row + rows) transposed times [col, col + cols) (part -1: none; mirror -1: a diagonal block).
-struct AssemblyBlock {
-  int rows = 0, cols = 0;
-  int position[3] = {0, 0, 0}, mirror[3] = {-1, -1, -1};
-  int part[2] = {-1, -1}, row[2] = {0, 0}, col[2] = {0, 0};
-  bool free_bodies = false;  ///< 3 x 3 between free bodies (W: 6 rows in each part): the fixed-size path
-};
-
-/// The target a plan of A's blocks (SimulatorData::assembly) writes: none, A_sparse's values, or A.
-enum class AssemblyKind { kNone, kSparse, kDense };
-
-/// The robot Delassus operator's workspace (src/cpp/sim/robot_delassus.cpp): the problem's blocks
-/// of rows, each block's chain (the root path of its deepest coordinate) and its columns of
-/// Y = D^-1/2 U^-1 J^T on that chain.
-struct RobotOperatorPlan {
-  struct Block {
-    int row = 0, k = 0;          ///< first row, rows (1-3)
-    int start = 0, length = 0;   ///< its chain: chain[start, start + length)
-  };
-  std::vector<Block> blocks;
-  std::vector<int> chain;       ///< every block's chain (ascending coordinates), one after another
-  std::vector<int> prefix;      ///< blocks x blocks (f <= g): the length of their common chain
-  std::vector<double> scale;    ///< sqrt(D^-1) per coordinate
-  std::vector<double> Y;        ///< 4 values per chain entry: the block's values, zero-padded
-  bool valid = false;           ///< the plan holds for these active contacts and anchors:
-  std::vector<int> active;
-  std::size_t anchors = 0;
-};
-
-struct SystemWork {
-  explicit SystemWork(const SystemModel& s);
-
-  pinocchio::Data data;
-  std::vector<int> v_index;  ///< the world velocity coordinate of each local one (SystemModel's)
-  Eigen::VectorXd q, v, zero, tau, nle, v_free, x;  ///< local coordinates; x: scratch
-  Eigen::VectorXd row_values;                       ///< one value per row of J (scratch)
-  /// The fused pass's revolute joints, in tree order: angles, then sines, then cosines (each
-  /// padded to a multiple of 4: the vector kernel's lanes)
-  std::vector<double> trig;
-  std::vector<double> Wt;                           ///< a free body's W^T by columns, padded (the vector kernel's)
-  std::vector<int> rows;  ///< the problem row of each row of J (contacts touching this part)
-  Eigen::MatrixXd J;      ///< rows x nv of the part: its columns of the contact Jacobian
-  Eigen::MatrixXd W;      ///< D^-1/2 U^-1 J^T (M = U D U^T)
-  Eigen::MatrixXd X;      ///< J's columns under W's back substitution (scratch)
-  Eigen::MatrixXd A;      ///< W^T W = J M^-1 J^T of this part (eq. 22)
-  /// The coordinates the contacts can move (J's nonzero columns and their ancestors) when they
-  /// are few (a humanoid's two legs and base): W, U and D restricted to them.
-  std::vector<int> support;
-  std::vector<char> in_support;
-  Eigen::MatrixXd U_support;
-  RobotOperatorPlan robot_plan;
-  bool mass_factored = false;  ///< free body: data.M, U, D hold its constant mass matrix and factor
-  /// A free body's D^-1/2 U^-1 (row-major, upper triangular), set with its factor: its W = S J^T.
-  std::array<double, 36> free_body_scaling{};
-  bool has_free_body_scaling = false;
-  bool free_body_scaling_diagonal = false;  ///< S is diagonal (a box: centre of mass at its origin)
-};
-
-class SimulatorData {
- public:
-  explicit SimulatorData(const SimulatorModel& sim);
-
-  std::vector<SystemWork> parts;  ///< per part of the world (SimulatorModel::systems)
-  Eigen::VectorXd q, v;
-  double t = 0.0;
-  JointControl control;
-
+/// The last contact problem and step, for inspection (Python's sim.data.A, .b, .candidate_lambda, ...) and
+/// for the next step. Written by the stages of step() / buildContactProblem / contactsAtState
+/// (src/cpp/sim/), read by the bindings, the rollout recorder and a C++ user; valid until the next
+/// step overwrites it. Sized once by SimulatorData's constructor (per candidate, per anchor) or
+/// per problem (per row: resized only when the number of rows changes).
+struct SimulatorOutputs {
   // The last contact problem (active blocks in candidate order, then anchors).
   std::vector<int> active;           ///< candidate index of each active contact block
-  /// Each active contact block's bodies (joints of the world model: plus, minus), first row, rows,
-  /// frame rows (t1, t2, n as T's first k rows, world) and world point: what the rows measure, for
-  /// the consistency projection of redundant contact sets (projectRedundantSets, on a missed step).
-  struct ContactBlock {
-    std::size_t plus = 0, minus = 0;
-    Eigen::Index row = 0;
-    int k = 0;
-    Eigen::Matrix3d T;
-    Eigen::Vector3d point;
-  };
-  std::vector<ContactBlock> blocks;
-  std::vector<int> block_order;  ///< scratch: blocks sorted by their pair of bodies
-  int inconsistent_groups = 0;   ///< redundant contact sets whose b was projected this step
-  Eigen::VectorXd b_before_projection;
   /// Rows of the problem: per contact (t1, t2, n), (t1, n) or (n), then anchors. The Jacobian
-  /// J (rows x nv) is held by columns of parts (SystemWork::J); denseJacobian() assembles it.
+  /// J (rows x nv) is held by columns of parts (the workspace's); denseJacobian() assembles it.
   Eigen::Index rows = 0;
   Eigen::MatrixXd A;                 ///< rows x rows, J M^-1 J^T (eq. 22), when dense
-  Eigen::SparseMatrix<double> A_sparse;  ///< the same when sparse (many parts, > 96 rows)
+  /// The same when sparse (many parts, > 96 rows). After a solve it may hold the previous step's
+  /// values (this step's were swapped into the workspace's Delassus operator, no copy): read A
+  /// through denseDelassus(), which takes them from wherever they are.
+  Eigen::SparseMatrix<double> A_sparse;
   bool sparse = false;               ///< which of A, A_sparse holds the last problem's operator
-  /// A came from the robot's chains (robotOperator) at the last Delassus stage: its Y (the robot
-  /// plan's) is D^-1/2 U^-1 J^T for this J and M
-  bool robot_chains = false;
   Eigen::VectorXd b;                 ///< eq. 27 at force level
   Eigen::VectorXd drift;             ///< J' v per row
   Eigen::VectorXd position_error;    ///< Psi per row (gap on normal rows, anchor error; 0 else)
   Eigen::VectorXd tangent_row;       ///< 1 on tangential rows, 0 on normal and anchor rows
+  Eigen::VectorXd tau;               ///< nv: the control torque at the last problem built
+  Eigen::VectorXd nle;               ///< nv: C(q, v) v + g(q) at the last problem built
   Eigen::VectorXd gaps;              ///< signed distance per candidate contact
   Eigen::VectorXd lambda;            ///< forces per row of the last solve
   SolverResult result;               ///< the last solve
-  SolverResult cold_result;          ///< workspace: the retry from zero after a warm-started solve missed
+  int inconsistent_groups = 0;       ///< redundant contact sets whose b was projected this step
 
-  // Per candidate / anchor, after the last solve (inactive candidates: 0, open).
+  // Per candidate / anchor, after the last solve (inactive candidates: 0, open). The solve
+  // stage reads candidate_lambda back as the next step's warm start and candidate_spring as
+  // the penalty formulation's spring state.
   Eigen::MatrixXd candidate_lambda;  ///< 3 x candidates, force (t1, t2, n); planar: t2 = 0; 1 row: t1 = t2 = 0
   std::vector<bool> have_candidate_lambda;
   std::vector<int> candidate_rows;   ///< rows of each candidate in the last problem (0: inactive)
   std::vector<ContactState> candidate_states;
   Eigen::MatrixXd anchor_lambda;     ///< 3 x anchors
   Eigen::MatrixXd candidate_spring;  ///< penalty: tangential spring elongation e_t per candidate (t1, t2, 0)
-  Eigen::VectorXd spring_rows;       ///< the same per row of the last problem (the formulation's state)
   Eigen::MatrixXd candidate_velocity;  ///< 3 x candidates, contact velocity J v after the step
+  /// coal pairs: the contact each slot holds now (per candidate; pair slots only)
+  Eigen::Matrix3Xd slot_point, slot_normal, slot_t1, slot_t2;
 
   // Statistics of the last step (ODE modes solve once per right-hand side).
   StepTimings timings;
@@ -357,48 +280,41 @@ class SimulatorData {
   double max_residual_step = 0.0;
   bool all_converged_step = true;
   double last_dt = 0.0;  ///< the step actually taken
-  double next_dt = 0.0;  ///< adaptive mode: the proposal for the next step
+  double next_dt = 0.0;  ///< adaptive mode: the proposal for the next step (read by it)
+};
 
-  // Blow-up check (step()): the state when the trajectory started; set at the first
-  // step after construction or after q, v or t were assigned (reference_speed < 0).
+/// Everything a step reuses from step to step and nobody outside src/cpp/sim/ reads: scratch
+/// vectors, the parts' Pinocchio Data and Jacobian columns, assembly plans, solver and Delassus
+/// objects. Defined in src/cpp/sim/workspace.hpp (internal); owned by its SimulatorData.
+struct SimulatorWorkspace;
+
+/// Model/Data split as in Pinocchio: the state (q, v, t, control) that a user sets, the outputs
+/// of the last step, and the private workspace. Sized once by the constructor; a step allocates
+/// only when the number of active contacts changes. Not copyable (one workspace per data).
+class SimulatorData {
+ public:
+  explicit SimulatorData(const SimulatorModel& sim);
+  ~SimulatorData();
+  SimulatorData(const SimulatorData&) = delete;
+  SimulatorData& operator=(const SimulatorData&) = delete;
+
+  // ---- state: written by the user (or the bindings) and by step(), which advances it.
+  Eigen::VectorXd q, v;
+  double t = 0.0;
+  JointControl control;
+  /// Blow-up check (step()): the state when the trajectory started; set at the first step after
+  /// construction or after q, v or t were assigned (reference_speed < 0: whoever assigns q, v
+  /// or t sets it to -1, as the bindings do).
   double reference_speed = -1.0;        ///< ||v||_inf at the start
   double reference_time = 0.0;
   double reference_penetration = 0.0;   ///< deepest active penetration after the first step
 
-  // coal pairs: geometry placements, results, and the contact each slot holds now
-  pinocchio::GeometryData geometry_data;
-  Eigen::Matrix3Xd slot_point, slot_normal, slot_t1, slot_t2;  ///< per candidate (pair slots only)
+  // ---- outputs of the last problem and step: written by the stages, read by anyone.
+  SimulatorOutputs out;
 
-  // Workspace, reused from step to step.
-  Eigen::Matrix3Xd plane_normal, plane_t1, plane_t2;  ///< world axes of each half-space
-  Eigen::VectorXd plane_offset;
-  Eigen::VectorXd tau, nle, v_free, dv, guess, q_tmp, row_velocity, zero_nv, b_scaled;
-  Eigen::VectorXd frame_turn;  ///< omega x v on each free flyer's linear rows, 0 elsewhere
-  std::shared_ptr<DenseDelassus> delassus;  ///< dense problems: updated in place from step to step
-  std::shared_ptr<SparseDelassus> sparse_delassus;  ///< sparse problems: values updated in place while the pattern holds
-  std::unique_ptr<ContactProblem> problem;
-  std::vector<int> problem_active;
-  std::unique_ptr<ContactSolver> solver;
-  /// ODE modes: per stage its velocity, acceleration and configuration rate in the Lie algebra
-  /// (dexp^-1 of the velocity); the step's start (q, v), a stage's increment and scratch.
-  std::vector<Eigen::VectorXd> stage_v, stage_a, stage_k;
-  Eigen::VectorXd ode_q0, ode_v0, ode_theta, ode_bracket, ode_bracket2, ode_q3, ode_v3, ode_theta3, ode_theta2, ode_v2;
-  std::vector<int> part_fill;  ///< per part: rows placed so far (contactJacobians)
-  std::vector<Eigen::Triplet<double>> triplets;  ///< the sparse A's entries, part by part, as last assembled
-  std::vector<int> triplet_position;  ///< where each sits in A_sparse's compressed storage
-  std::vector<std::vector<int>> triplet_part_rows;  ///< each part's rows when the triplets were listed
-  std::vector<AssemblyBlock> assembly;  ///< the sparse A's lower triangle, block by block, from the parts' W
-  AssemblyKind assembly_kind = AssemblyKind::kNone;  ///< what `assembly` was planned for
-  long pattern_version = 0;             ///< counts the sparse A's pattern builds (the plan keeps it)
-  long operator_pattern_version = -1;   ///< the pattern sparse_delassus was built with
-  bool a_in_operator = false;           ///< this step's A_sparse values were swapped into sparse_delassus
-  bool a_known_finite = false;          ///< the assembly found every value of this step's A_sparse finite
-  std::vector<const double*> part_w, part_wt;  ///< each part's W, W^T (assembleFromPlan's workspace)
-  std::vector<int> part_stride;                ///< each part's rows (W^T's column length)
-  bool parts_share_rows = false;  ///< a contact between two parts: its rows in both
-  std::vector<int> row_part, row_local;  ///< per row: its part and local row (rows in one part each)
-  Eigen::VectorXd row_scratch;  ///< one value per row
-  Eigen::VectorXd nv_scratch;   ///< one value per velocity coordinate
+  // ---- workspace: written and read by the stages only (src/cpp/sim/), lives as long as
+  // this data (an opaque type outside the simulator's own sources).
+  std::unique_ptr<SimulatorWorkspace> work;
 };
 
 /// The contact Jacobian J (rows x nv) of the last problem, assembled from the parts' columns.
@@ -432,15 +348,16 @@ Eigen::MatrixXd denseDelassus(const SimulatorData& sd);
 void step(const SimulatorModel& sim, SimulatorData& sd);
 
 /// The contacts of the current state (q, v) without a step, for a trajectory's first record:
-/// kinematics, detection and the contact Jacobians (stages 1-3) give sd.gaps (every candidate's
-/// signed distance), the active set with sd.candidate_rows, and sd.candidate_velocity = J v of the
+/// kinematics, detection and the contact Jacobians (stages 1-3) give sd.out.gaps (every candidate's
+/// signed distance), the active set with sd.out.candidate_rows, and sd.out.candidate_velocity = J v of the
 /// active candidates (0 for the others, as after a step). Nothing is solved: candidate_lambda and
 /// candidate_states keep the last step's. coal's cached GJK guesses are put back, so the next step
 /// computes exactly what it would have without this call.
 void contactsAtState(const SimulatorModel& sim, SimulatorData& sd);
 
 /// The contact problem (eq. 65) at the current state, for inspection and tests:
-/// fills sd.J, sd.A, sd.b (force level, eq. 27 with the given delta, zeta) and sd.active.
+/// fills sd.out.A (or A_sparse), sd.out.b (force level, eq. 27 with the given delta, zeta), sd.out.active and
+/// the parts' columns of J (denseJacobian).
 /// implicit_pd_step = h > 0 folds the joint PD implicitly over a step h into M (time stepping).
 void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                          const Eigen::VectorXd& v, double delta, double zeta, double implicit_pd_step = 0.0);

@@ -1,0 +1,155 @@
+// The simulator's private workspace (internal to src/cpp/sim/ and the bindings): what a step
+// reuses from step to step and no user reads. SimulatorData owns one (SimulatorData::work) for
+// its whole life; the stages of a step (stages.hpp) write and read it, and nothing in it is an
+// output: the last problem's inspectable results are SimulatorData::out (simulator.hpp).
+#pragma once
+
+#include <array>
+#include <memory>
+#include <vector>
+
+#include <Eigen/SparseCore>
+#include <pinocchio/multibody/data.hpp>
+#include <pinocchio/multibody/geometry.hpp>
+
+#include "stiction/contact_problem.hpp"
+#include "stiction/delassus.hpp"
+#include "stiction/formulation.hpp"
+#include "stiction/simulator.hpp"
+#include "stiction/solver.hpp"
+
+namespace stiction {
+
+/// One block of the lower triangle of a sparse A shared by parts (two contacts' rows, or anchors'),
+/// and where its columns and its mirror's start in the compressed storage (each column's `rows`
+/// values are consecutive there): the sum over its one or two parts s of W_s's columns
+/// [row, row + rows) transposed times [col, col + cols) (part -1: none; mirror -1: a diagonal block).
+struct AssemblyBlock {
+  int rows = 0, cols = 0;
+  int position[3] = {0, 0, 0}, mirror[3] = {-1, -1, -1};
+  int part[2] = {-1, -1}, row[2] = {0, 0}, col[2] = {0, 0};
+  bool free_bodies = false;  ///< 3 x 3 between free bodies (W: 6 rows in each part): the fixed-size path
+};
+
+/// The target a plan of A's blocks (SimulatorWorkspace::assembly) writes: none, A_sparse's values, or A.
+enum class AssemblyKind { kNone, kSparse, kDense };
+
+/// The robot Delassus operator's workspace (src/cpp/sim/robot_delassus.cpp): the problem's blocks
+/// of rows, each block's chain (the root path of its deepest coordinate) and its columns of
+/// Y = D^-1/2 U^-1 J^T on that chain.
+struct RobotOperatorPlan {
+  struct Block {
+    int row = 0, k = 0;          ///< first row, rows (1-3)
+    int start = 0, length = 0;   ///< its chain: chain[start, start + length)
+  };
+  std::vector<Block> blocks;
+  std::vector<int> chain;       ///< every block's chain (ascending coordinates), one after another
+  std::vector<int> prefix;      ///< blocks x blocks (f <= g): the length of their common chain
+  std::vector<double> scale;    ///< sqrt(D^-1) per coordinate
+  std::vector<double> Y;        ///< 4 values per chain entry: the block's values, zero-padded
+  bool valid = false;           ///< the plan holds for these active contacts and anchors:
+  std::vector<int> active;
+  std::size_t anchors = 0;
+};
+
+/// The workspace of one part: its Pinocchio Data, its coordinates, and its columns of the
+/// contact Jacobian (the rows of the contacts that touch it).
+struct SystemWork {
+  explicit SystemWork(const SystemModel& s);
+
+  pinocchio::Data data;
+  std::vector<int> v_index;  ///< the world velocity coordinate of each local one (SystemModel's)
+  Eigen::VectorXd q, v, zero, tau, nle, v_free, x;  ///< local coordinates; x: scratch
+  Eigen::VectorXd row_values;                       ///< one value per row of J (scratch)
+  /// The fused pass's revolute joints, in tree order: angles, then sines, then cosines (each
+  /// padded to a multiple of 4: the vector kernel's lanes)
+  std::vector<double> trig;
+  std::vector<double> Wt;                           ///< a free body's W^T by columns, padded (the vector kernel's)
+  std::vector<int> rows;  ///< the problem row of each row of J (contacts touching this part)
+  Eigen::MatrixXd J;      ///< rows x nv of the part: its columns of the contact Jacobian
+  Eigen::MatrixXd W;      ///< D^-1/2 U^-1 J^T (M = U D U^T)
+  Eigen::MatrixXd X;      ///< J's columns under W's back substitution (scratch)
+  Eigen::MatrixXd A;      ///< W^T W = J M^-1 J^T of this part (eq. 22)
+  /// The coordinates the contacts can move (J's nonzero columns and their ancestors) when they
+  /// are few (a humanoid's two legs and base): W, U and D restricted to them.
+  std::vector<int> support;
+  std::vector<char> in_support;
+  Eigen::MatrixXd U_support;
+  RobotOperatorPlan robot_plan;
+  bool mass_factored = false;  ///< free body: data.M, U, D hold its constant mass matrix and factor
+  /// A free body's D^-1/2 U^-1 (row-major, upper triangular), set with its factor: its W = S J^T.
+  std::array<double, 36> free_body_scaling{};
+  bool has_free_body_scaling = false;
+  bool free_body_scaling_diagonal = false;  ///< S is diagonal (a box: centre of mass at its origin)
+};
+
+struct SimulatorWorkspace {
+  explicit SimulatorWorkspace(const SimulatorModel& sim);
+
+  // Parts (kinematics, Delassus): per part of the world (SimulatorModel::systems), its Data, its
+  // columns of J (the output J is assembled from them, denseJacobian) and its factor of M.
+  std::vector<SystemWork> parts;
+  std::vector<int> part_fill;  ///< per part: rows placed so far (contactJacobians)
+  bool parts_share_rows = false;  ///< a contact between two parts: its rows in both
+  std::vector<int> row_part, row_local;  ///< per row: its part and local row (rows in one part each)
+
+  // Detection: coal's geometry placements and results (its cached GJK guesses carry over), and
+  // each half-space's world axes.
+  pinocchio::GeometryData geometry_data;
+  Eigen::Matrix3Xd plane_normal, plane_t1, plane_t2;
+  Eigen::VectorXd plane_offset;
+
+  /// Each active contact block's bodies (joints of the world model: plus, minus), first row, rows,
+  /// frame rows (t1, t2, n as T's first k rows, world) and world point: what the rows measure, for
+  /// the consistency projection of redundant contact sets (projectRedundantSets, on a missed step).
+  struct ContactBlock {
+    std::size_t plus = 0, minus = 0;
+    Eigen::Index row = 0;
+    int k = 0;
+    Eigen::Matrix3d T;
+    Eigen::Vector3d point;
+  };
+  std::vector<ContactBlock> blocks;
+  std::vector<int> block_order;  ///< scratch: blocks sorted by their pair of bodies
+  Eigen::VectorXd b_before_projection;
+
+  // Dynamics and the Delassus operator.
+  Eigen::VectorXd v_free, dv, zero_nv;
+  Eigen::VectorXd frame_turn;  ///< omega x v on each free flyer's linear rows, 0 elsewhere
+  /// A came from the robot's chains (robotOperator) at the last Delassus stage: its Y (the robot
+  /// plan's) is D^-1/2 U^-1 J^T for this J and M
+  bool robot_chains = false;
+  std::shared_ptr<DenseDelassus> delassus;  ///< dense problems: updated in place from step to step
+  std::shared_ptr<SparseDelassus> sparse_delassus;  ///< sparse problems: values updated in place while the pattern holds
+  std::vector<Eigen::Triplet<double>> triplets;  ///< the sparse A's entries, part by part, as last assembled
+  std::vector<int> triplet_position;  ///< where each sits in A_sparse's compressed storage
+  std::vector<std::vector<int>> triplet_part_rows;  ///< each part's rows when the triplets were listed
+  std::vector<AssemblyBlock> assembly;  ///< the sparse A's lower triangle, block by block, from the parts' W
+  AssemblyKind assembly_kind = AssemblyKind::kNone;  ///< what `assembly` was planned for
+  long pattern_version = 0;             ///< counts the sparse A's pattern builds (the plan keeps it)
+  long operator_pattern_version = -1;   ///< the pattern sparse_delassus was built with
+  bool a_in_operator = false;           ///< this step's A_sparse values were swapped into sparse_delassus
+  bool a_known_finite = false;          ///< the assembly found every value of this step's A_sparse finite
+  std::vector<const double*> part_w, part_wt;  ///< each part's W, W^T (assembleFromPlan's workspace; point into parts)
+  std::vector<int> part_stride;                ///< each part's rows (W^T's column length)
+
+  // Solve: the problem handed to the formulation (kept for the exact-law measure of a result
+  // read later), the formulation itself and its warm start.
+  std::unique_ptr<ContactProblem> problem;
+  std::vector<int> problem_active;
+  std::unique_ptr<ContactSolver> solver;
+  SolverResult cold_result;     ///< the retry from zero after a warm-started solve missed
+  Eigen::VectorXd guess, b_scaled;
+  Eigen::VectorXd spring_rows;  ///< penalty: the springs per row of the last problem (the formulation's state)
+
+  // Integration. ODE modes: per stage its velocity, acceleration and configuration rate in the
+  // Lie algebra (dexp^-1 of the velocity); the step's start (q, v), a stage's increment and scratch.
+  Eigen::VectorXd q_tmp, row_velocity;
+  std::vector<Eigen::VectorXd> stage_v, stage_a, stage_k;
+  Eigen::VectorXd ode_q0, ode_v0, ode_theta, ode_bracket, ode_bracket2, ode_q3, ode_v3, ode_theta3, ode_theta2, ode_v2;
+
+  Eigen::VectorXd row_scratch;  ///< one value per row
+  Eigen::VectorXd nv_scratch;   ///< one value per velocity coordinate
+};
+
+}  // namespace stiction
