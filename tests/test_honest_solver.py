@@ -11,6 +11,7 @@ from stiction import Constraint, ContactProblem, SolveStatus
 from stiction.problems import random_problem, two_cube_stack
 
 mpmath = pytest.importorskip("mpmath")
+import exact_natural_map  # noqa: E402  (after the mpmath skip)
 
 SOLVERS = ["default", "nsgs", "newton", "admm"]
 
@@ -18,30 +19,8 @@ SOLVERS = ["default", "nsgs", "newton", "admm"]
 # ---------------------------------------------------------------- the natural map in 80 digits
 
 def natural_map_80_digits(A, b, mus, lam):
-    """||lam - P_C(lam - (u + E s(u)))||, u = A lam - b, spatial blocks (t1, t2, n), evaluated
-    in 80-digit arithmetic at the given double-precision lam."""
-    mp = mpmath.mp
-    with mpmath.workdps(80):
-        m = len(b)
-        Am = [[mp.mpf(float(A[i, j])) for j in range(m)] for i in range(m)]
-        lm = [mp.mpf(float(x)) for x in lam]
-        u = [mpmath.fsum(Am[i][j] * lm[j] for j in range(m)) - mp.mpf(float(b[i])) for i in range(m)]
-        sq = mp.mpf(0)
-        for k, mu in enumerate(mus):
-            mu, o = mp.mpf(float(mu)), 3 * k
-            ut = mpmath.sqrt(u[o] ** 2 + u[o + 1] ** 2)
-            z = [lm[o] - u[o], lm[o + 1] - u[o + 1], lm[o + 2] - u[o + 2] - mu * ut]
-            zt, zn = mpmath.sqrt(z[0] ** 2 + z[1] ** 2), z[2]
-            if zn >= 0 and zt <= mu * zn:
-                p = z
-            elif mu * zt <= -zn:
-                p = [mp.mpf(0)] * 3
-            else:
-                a = (zn + mu * zt) / (1 + mu * mu)
-                s = mu * a / zt if zt > 0 else mp.mpf(0)
-                p = [z[0] * s, z[1] * s, a]
-            sq += sum((lm[o + i] - p[i]) ** 2 for i in range(3))
-        return float(mpmath.sqrt(sq))
+    """The natural map's norm in 80 digits at lam, as a float (tests/exact_natural_map.py)."""
+    return float(exact_natural_map.natural_map_80_digits(A, b, mus, lam))
 
 
 def ill_conditioned(seed, contacts=1):

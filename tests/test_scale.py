@@ -22,6 +22,7 @@ import stiction
 from stiction import Constraint, ContactProblem, SolveStatus
 
 mpmath = pytest.importorskip("mpmath")
+import exact_natural_map  # noqa: E402  (after the mpmath skip)
 
 TOL = 1e-8
 # Powers of two near 1e+-30, 1e+-50, 1e+-100, 1e+-150, 1e+-200, 1e+-300: the driver's scaling by powers
@@ -53,31 +54,8 @@ def base_problem():
 
 
 def natural_map_80_digits(A, b, mus, lam):
-    """||lam - P_C(lam - (u + E s(u)))||, u = A lam - b, spatial blocks, in 80-digit arithmetic
-    (mpmath: no exponent limit, so scales of 1e+-300 are exact inputs)."""
-    mp = mpmath.mp
-    with mpmath.workdps(80):
-        m = len(b)
-        Am = [[mp.mpf(float(A[i, j])) for j in range(m)] for i in range(m)]
-        lm = [mp.mpf(float(x)) for x in lam]
-        u = [mpmath.fsum(Am[i][j] * lm[j] for j in range(m)) - mp.mpf(float(b[i])) for i in range(m)]
-        sq = mp.mpf(0)
-        for k, mu in enumerate(mus):
-            mu, o = mp.mpf(float(mu)), 3 * k
-            ut = mpmath.sqrt(u[o] ** 2 + u[o + 1] ** 2)
-            z = [lm[o] - u[o], lm[o + 1] - u[o + 1], lm[o + 2] - u[o + 2] - mu * ut]
-            zt, zn = mpmath.sqrt(z[0] ** 2 + z[1] ** 2), z[2]
-            if zn >= 0 and zt <= mu * zn:
-                p = z
-            elif mu * zt <= -zn:
-                p = [mp.mpf(0)] * 3
-            else:
-                a = (zn + mu * zt) / (1 + mu * mu)
-                s = mu * a / zt if zt > 0 else mp.mpf(0)
-                p = [z[0] * s, z[1] * s, a]
-            sq += sum((lm[o + i] - p[i]) ** 2 for i in range(3))
-        bn = mpmath.sqrt(mpmath.fsum(mp.mpf(float(x)) ** 2 for x in b))
-        return mpmath.sqrt(sq) / bn  # relative, as an mpf (it may be beyond double's range)
+    """The relative natural map ||lam - P_C(...)|| / ||b|| in 80 digits (tests/exact_natural_map.py)."""
+    return exact_natural_map.relative_natural_map_80_digits(A, b, mus, lam)
 
 
 def solve(A, b, mu, formulation, solver):

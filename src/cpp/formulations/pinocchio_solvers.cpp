@@ -372,15 +372,20 @@ class PinocchioFormulation final : public Formulation {
     bool converged = false, before_loop = false;
     std::size_t count = 0;
     double primal = 0.0, dual = 0.0, complementarity = 0.0;
+    // The budget and the tolerance (every one of Pinocchio's four stopping tests at `tol`), for
+    // either solver's settings (the same fields in two types).
+    auto configure = [&](auto& solver_settings, std::size_t budget) {
+      solver_settings.max_iterations = budget;
+      solver_settings.absolute_feasibility_tol = tol;
+      solver_settings.relative_feasibility_tol = tol;
+      solver_settings.absolute_complementarity_tol = tol;
+      solver_settings.relative_complementarity_tol = tol;
+      solver_settings.solve_ncp = ncp_;
+    };
     auto call = [&](std::size_t iterations, bool from_lam, bool warm_rho) -> std::size_t {
       const std::size_t budget = iterations - 1;  // (its loop runs max_iterations + 1 times)
       if (admm_) {
-        admm_settings_.max_iterations = budget;
-        admm_settings_.absolute_feasibility_tol = tol;
-        admm_settings_.relative_feasibility_tol = tol;
-        admm_settings_.absolute_complementarity_tol = tol;
-        admm_settings_.relative_complementarity_tol = tol;
-        admm_settings_.solve_ncp = ncp_;
+        configure(admm_settings_, budget);
         admm_settings_.lanczos_size = static_cast<std::size_t>(std::min<Eigen::Index>(kAdmmLanczosSize, m));
         admm_settings_.warmstart_rho_with_previous_result = warm_rho;
         if (from_lam)
@@ -395,12 +400,7 @@ class PinocchioFormulation final : public Formulation {
         dual = admm_result_.dual_feasibility;
         complementarity = admm_result_.complementarity;
       } else {
-        pgs_settings_.max_iterations = budget;
-        pgs_settings_.absolute_feasibility_tol = tol;
-        pgs_settings_.relative_feasibility_tol = tol;
-        pgs_settings_.absolute_complementarity_tol = tol;
-        pgs_settings_.relative_complementarity_tol = tol;
-        pgs_settings_.solve_ncp = ncp_;
+        configure(pgs_settings_, budget);
         if (from_lam)
           pgs_result_.setConstraintImpulseGuess(result.lam);
         else
