@@ -21,7 +21,7 @@ _TYPES = {
 # the argument on error): the type a caller should pass, by argument name (and class, where the
 # same name means different things).
 _ARG_TYPES = {
-    "rows": "int", "n_steps": "int", "record_every": "int",
+    "rows": "int", "n_steps": "int", "record_every": "int", "initial_contacts": "bool",
     "mu": "float", "delta": "float", "zeta": "float", "relative_speed_floor": "float",
     "asymmetry_tolerance": "float",
     "A": "numpy.typing.ArrayLike", "b": "numpy.typing.ArrayLike", "lam": "numpy.typing.ArrayLike",

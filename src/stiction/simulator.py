@@ -23,10 +23,11 @@ from .scene_schema import did_you_mean
 _VECTOR_KEYS = ("t", "residual", "iterations", "converged", "dt")
 
 
-def _rollout(model, data, n_steps: int, every: int = 1) -> dict:
+def _rollout(model, data, n_steps: int, every: int = 1, initial_contacts: bool = True) -> dict:
     """_core.rollout with every per-record matrix as a 2-D array (a 1-row Eigen
-    matrix may come back 1-D)."""
-    rec = _core.rollout(model, data, n_steps, every)
+    matrix may come back 1-D). initial_contacts=False: record 0's contact fields are not measured
+    (for a caller that drops record 0: the callback loops' one-step chunks)."""
+    rec = _core.rollout(model, data, n_steps, every, initial_contacts)
     n = len(rec["t"])
     return {k: (np.asarray(v).reshape(n) if k in _VECTOR_KEYS else np.asarray(v).reshape(n, -1))
             for k, v in rec.items()}
@@ -324,7 +325,7 @@ class Simulator:
             chunks = [_rollout(self.model, self.data, 0, 1)]
             for k in range(1, n + 1):
                 callback(self)
-                r = _rollout(self.model, self.data, 1, 1)
+                r = _rollout(self.model, self.data, 1, 1, initial_contacts=False)  # (its record 0 dropped)
                 if k % record_every == 0 or k == n:  # (the last state too, as the C++ loop)
                     chunks.append({key: val[1:] for key, val in r.items()})
             rec = {key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]}
@@ -336,7 +337,7 @@ class Simulator:
         while self.data.t < end - 1e-12:
             if callback is not None:
                 callback(self)
-            r = _rollout(self.model, self.data, 1, 1)
+            r = _rollout(self.model, self.data, 1, 1, initial_contacts=False)  # (its record 0 dropped)
             chunks.append({key: val[1:] for key, val in r.items()})
         rec = {key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]}
         return self._trajectory(rec)

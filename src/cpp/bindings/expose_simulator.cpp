@@ -286,11 +286,12 @@ bp::dict recordingViews(const Recording& rec, const bp::object& buffer) {
 /// the memory of the arrays returned: written once, not copied (the copy and the page faults of
 /// its fresh memory were ~0.2 us of a 5.5 us robot step).
 bp::dict rollout(const bp::object& sim_, const bp::object& data_, const bp::object& n_steps_,
-                 const bp::object& every_) {
+                 const bp::object& every_, const bp::object& initial_contacts_) {
   const SimulatorModel& sim = simArg(sim_, "rollout");
   SimulatorData& d = dataArg(data_, "rollout");
   const int n_steps = fromPython<int>(n_steps_, "rollout: n_steps");
   const int every = fromPython<int>(every_, "rollout: record_every");
+  const bool initial_contacts = fromPython<bool>(initial_contacts_, "rollout: initial_contacts");
   Recording rec;
   bp::object buffer;
   if (n_steps >= 0 && every >= 1) {  // (else stiction::rollout says what is wrong)
@@ -303,7 +304,7 @@ bp::dict rollout(const bp::object& sim_, const bp::object& data_, const bp::obje
   {
     InUse busy(&d, "this SimulatorData");
     ReleaseGil nogil;
-    stiction::rollout(sim, d, n_steps, every, rec);  // a failing step throws after the GIL is back
+    stiction::rollout(sim, d, n_steps, every, rec, initial_contacts);  // a failing step throws after the GIL is back
   }
   return recordingViews(rec, buffer);
 }
@@ -551,8 +552,12 @@ void exposeSimulator() {
   bp::def("build_contact_problem", &doBuild,
           (bp::arg("sim"), bp::arg("data"), bp::arg("q"), bp::arg("v"), bp::arg("delta"), bp::arg("zeta")),
           "fill data.J, A, b (eq. 27), drift, position_error and active at (q, v)");
-  bp::def("rollout", &rollout, (bp::arg("sim"), bp::arg("data"), bp::arg("n_steps"), bp::arg("record_every") = 1),
-          "n steps in C++ (the GIL released); returns a dict of arrays (t, q, v, lam, gaps, states, residual, ...)");
+  bp::def("rollout", &rollout,
+          (bp::arg("sim"), bp::arg("data"), bp::arg("n_steps"), bp::arg("record_every") = 1,
+           bp::arg("initial_contacts") = true),
+          "n steps in C++ (the GIL released); returns a dict of arrays (t, q, v, lam, gaps, states, residual, ...); "
+          "initial_contacts=False leaves record 0's contact fields as the last step wrote them (for a caller "
+          "that drops record 0) instead of measuring them at the starting state");
   bp::def("batch_rollout", &batchRollout,
           (bp::arg("sims"), bp::arg("datas"), bp::arg("n_steps"), bp::arg("record_every") = 1,
            bp::arg("threads") = 0),

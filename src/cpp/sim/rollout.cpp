@@ -135,8 +135,9 @@ void checkCounts(int n_steps, int every) {
 // J v: contactsAtState), not those of the step that led to it (or of none: zeros). The last is
 // the final state even when n_steps is not a multiple of `every` (else the trajectory would end
 // up to every - 1 steps early, and a summary's duration with it).
-void run(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out) {
-  contactsAtState(sim, d);
+void run(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out,
+         bool initial_contacts = true) {
+  if (initial_contacts) contactsAtState(sim, d);
   out.record(sim, d, /*initial=*/true);
   for (int k = 1; k <= n_steps; ++k) {
     step(sim, d);
@@ -146,13 +147,14 @@ void run(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Re
 
 }  // namespace
 
-void rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out) {
+void rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out,
+             bool initial_contacts) {
   checkCounts(n_steps, every);
   if (!out.fits(sim, n_steps, every))
     out.allocate(sim, n_steps, every);
   else if (out.records != 0)
     out.clear();  // (laid out for these counts but used: NaN again, from its first row)
-  run(sim, d, n_steps, every, out);
+  run(sim, d, n_steps, every, out, initial_contacts);
 }
 
 void batchRollout(const std::vector<BatchItem>& items, int n_steps, int every, int threads,

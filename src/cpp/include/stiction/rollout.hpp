@@ -70,7 +70,11 @@ struct Recording {
 /// n_steps of `d` from its current state, recording every `every`-th and the last (into `out` as laid out by
 /// allocate for these counts, else allocated here). Throws std::invalid_argument for bad counts; a
 /// step that throws propagates (the recording keeps what came before it).
-void rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out);
+/// `initial_contacts` false: record 0's contact fields are left as the last step wrote them instead
+/// of measured at the starting state (contactsAtState: kinematics and detection once more), for a
+/// caller that drops record 0, such as a Python callback loop stepping one chunk at a time.
+void rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out,
+             bool initial_contacts = true);
 
 /// One simulation of a batch: its model, its data (state in, state out) and what it records.
 struct BatchItem {
