@@ -113,7 +113,7 @@ std::string constraintRepr(const Constraint& c) { return "stiction.Constraint." 
 bool constraintEq(const Constraint& a, const bp::object& other) {
   bp::extract<const Constraint&> b(other);
   if (!b.check()) return false;
-  return a.kind == b().kind && a.size == b().size && a.mu == b().mu;
+  return a.kind == b().kind && a.size == b().size && a.mu == b().mu && a.lower == b().lower && a.upper == b().upper;
 }
 
 }  // namespace
@@ -123,7 +123,8 @@ void exposeProblem() {
       .value("bilateral", ConstraintKind::kBilateral)
       .value("unilateral", ConstraintKind::kUnilateral)
       .value("planar_friction", ConstraintKind::kPlanarFriction)
-      .value("spatial_friction", ConstraintKind::kSpatialFriction);
+      .value("spatial_friction", ConstraintKind::kSpatialFriction)
+      .value("box", ConstraintKind::kBox);
   bp::enum_<ContactState>("ContactState")
       .value("open", ContactState::kOpen)
       .value("stick", ContactState::kStick)
@@ -133,7 +134,7 @@ void exposeProblem() {
   bp::class_<Constraint>("Constraint",
                          "One block of rows. Build with Constraint.bilateral(k), "
                          "Constraint.unilateral(), Constraint.planar_friction(mu), "
-                         "Constraint.spatial_friction(mu). Normal row last.",
+                         "Constraint.spatial_friction(mu), Constraint.box(lower, upper). Normal row last.",
                          bp::no_init)
       .def("bilateral", &bilateral, bp::arg("rows"), "k equality rows (C = R^k)")
       .staticmethod("bilateral")
@@ -145,9 +146,14 @@ void exposeProblem() {
       .def("spatial_friction", &spatial, bp::arg("mu"),
            "3 rows (t1, t2, n), ||lambda_t|| <= mu lambda_n")
       .staticmethod("spatial_friction")
+      .def("box", &Constraint::box, (bp::arg("lower"), bp::arg("upper")),
+           "1 row, lower <= lambda <= upper (lower <= 0 <= upper): joint dry friction, actuator effort limits")
+      .staticmethod("box")
       .def_readonly("kind", &Constraint::kind)
       .def_readonly("size", &Constraint::size)
       .def_readonly("mu", &Constraint::mu)
+      .def_readonly("lower", &Constraint::lower)
+      .def_readonly("upper", &Constraint::upper)
       .def("__repr__", &constraintRepr)
       .def("__eq__", &constraintEq);
 

@@ -40,7 +40,7 @@ ContactProblem::ContactProblem(std::shared_ptr<const DelassusOperator> delassus,
   Eigen::Index row = 0;
   for (std::size_t i = 0; i < constraints_.size(); ++i) {
     const Constraint& c = constraints_[i];
-    const int expected = c.kind == ConstraintKind::kUnilateral       ? 1
+    const int expected = c.kind == ConstraintKind::kUnilateral || c.kind == ConstraintKind::kBox ? 1
                          : c.kind == ConstraintKind::kPlanarFriction ? 2
                          : c.kind == ConstraintKind::kSpatialFriction ? 3
                                                                       : c.size;
@@ -51,6 +51,10 @@ ContactProblem::ContactProblem(std::shared_ptr<const DelassusOperator> delassus,
       throw std::invalid_argument("ContactProblem: constraint " + std::to_string(i) +
                                   " has friction coefficient mu = " + fmt(c.mu) +
                                   "; mu must be finite and >= 0");
+    if (c.kind == ConstraintKind::kBox &&
+        !(std::isfinite(c.lower) && std::isfinite(c.upper) && c.lower <= 0.0 && c.upper >= 0.0))
+      throw std::invalid_argument("ContactProblem: constraint " + std::to_string(i) + " (" + c.describe() +
+                                  ") needs finite bounds lower <= 0 <= upper");
     offsets_.push_back(row);
     row += c.size;
   }
