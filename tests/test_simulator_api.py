@@ -43,7 +43,12 @@ def test_every_override_takes_effect():
     assert Simulator("cube-slide", duration=0.25).rollout().t[-1] == pytest.approx(0.25)
     assert set(OVERRIDES) == {"dt", "duration", "mode", "delta", "zeta", "mu", "tolerance", "max_iterations",
                               "solver", "ode_tolerance", "warm_start", "formulation", "pyramid_facets", "pyramid_inscribed",
-                              "penalty_stiffness", "penalty_damping", "rigid_body_passes"}
+                              "penalty_stiffness", "penalty_damping", "rigid_body_passes", "joint_limits",
+                              "joint_friction", "joint_damping", "effort_limits"}
+    for key in ("joint_limits", "joint_friction", "joint_damping", "effort_limits"):
+        assert getattr(base.settings, key) is True and getattr(Simulator("cube-slide", **{key: False}).settings, key) is False
+        with pytest.raises(ValueError, match=key):
+            Simulator("cube-slide", **{key: 1})
     # the formulation and its parameters (one formulation at a time: the others' parameters are refused)
     for name, params in (("pyramid", {"pyramid_facets": 8, "pyramid_inscribed": True}),
                          ("penalty", {"penalty_stiffness": 3e4, "penalty_damping": 2e-3})):

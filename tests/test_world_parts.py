@@ -151,14 +151,21 @@ def test_robot_contact_rows_match_pinocchio(scene):
         expected = T @ point_jacobian(model, data, c.frame, point)
         np.testing.assert_allclose(J[row:row + 3], expected, rtol=0, atol=1e-12 * np.abs(expected).max())
         row += 3
-    assert row == J.shape[0] >= 12
+    assert row >= 12
+    # then the joints' rows (docs/joint-rows.md): +e_dof (lower limit, friction, effort), -e_dof (upper limit)
+    for kind, dof in sim.data.joint_rows:
+        expected = np.zeros(model.nv)
+        expected[dof] = -1.0 if kind == "upper_limit" else 1.0
+        assert np.array_equal(J[row], expected), (kind, dof)
+        row += 1
+    assert row == J.shape[0]
 
 
 def test_a_robots_operator_on_the_coordinates_its_contacts_move():
     """TALOS on its two soles: the contacts move the base and the legs, 18 of 38 coordinates; A is
     assembled from U, D and J restricted to those (their ancestors included) and equals
     J M^-1 J^T of the whole model, computed independently."""
-    sim = Simulator(load_scene("talos-stand"))
+    sim = Simulator(load_scene("talos-stand"), joint_friction=False, joint_limits=False, effort_limits=False)
     sim.rollout(0.02)
     q = np.asarray(sim.data.q).copy()
     v = 0.1 * np.random.default_rng(4).standard_normal(sim.scene.model.nv)

@@ -250,6 +250,9 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             q0 = _quaternion_check(model, q0, "initial.q")
         if initial["joints"] is not None:
             q0 = _named_joint_positions(model, q0, initial["joints"], initial["q"] is not None)
+        if cfg["joints"]["override"]:
+            model = model.copy()  # (the loaded robot's model stays as its URDF says)
+            _joint_overrides(model, cfg["joints"]["override"])
         if control["lock_joints"] and model.njoints > 2:
             # A rigid robot: every joint but the free flyer held at its initial value.
             lock = list(range(2, model.njoints))
@@ -487,6 +490,39 @@ def _per_joint_gains(model: pin.Model, gains: list, start: int, robot_nv: int, k
                     kp[iv:iv + nvj] = entry["kp"]
                 if entry["kd"] is not None:
                     kd[iv:iv + nvj] = entry["kd"]
+
+
+def _joint_overrides(model: pin.Model, entries: list) -> None:
+    """[[joints.override]]: the position limits, dry friction, damping and effort limits of the joints
+    whose names match a pattern, in place; every pattern must match a joint."""
+    import fnmatch
+
+    names = [model.names[j] for j in range(1, model.njoints)]
+    for k, entry in enumerate(entries):
+        for pattern in entry["joints"]:
+            matched = [j for j in range(1, model.njoints) if fnmatch.fnmatchcase(model.names[j], pattern)]
+            if not matched:
+                hint = did_you_mean(pattern, names)
+                raise SceneError(f"joints.override[{k}].joints: {pattern!r} matches no joint ({hint}joints: "
+                                 f"{', '.join(names) or 'none'})")
+            for j in matched:
+                joint = model.joints[j]
+                iv, nvj, iq = joint.idx_v, joint.nv, joint.idx_q
+                for key, array in (("friction", model.friction), ("damping", model.damping),
+                                   ("effort", model.effortLimit)):
+                    if entry[key] is not None:
+                        array[iv:iv + nvj] = entry[key]
+                for key, array in (("lower", model.lowerPositionLimit), ("upper", model.upperPositionLimit)):
+                    if entry[key] is None:
+                        continue
+                    if joint.nq != 1 or joint.nv != 1:
+                        raise SceneError(f"joints.override[{k}].{key}: joint {model.names[j]!r} is not a 1-dof joint "
+                                         "(position limits apply to revolute and prismatic joints)")
+                    array[iq] = entry[key]
+                if model.lowerPositionLimit[iq] > model.upperPositionLimit[iq]:
+                    raise SceneError(f"joints.override[{k}]: joint {model.names[j]!r} would have lower limit "
+                                     f"{model.lowerPositionLimit[iq]:g} above its upper limit "
+                                     f"{model.upperPositionLimit[iq]:g}")
 
 
 STANDING_CONTACT_TOLERANCE = 1e-6  # m: a contact within this of the lowest one carries weight

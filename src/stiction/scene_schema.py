@@ -107,6 +107,30 @@ CONTROL = Table("control", "Joint PD towards the initial posture (or `q_target`)
     Key("lock_joints", "bool", "hold every joint at its initial value (a rigid robot)", False),
 ), tables=(GAINS,))
 
+JOINT_OVERRIDE = Table("override", "Per-joint values over the URDF's (entries apply in order: a later one wins); "
+                       "each value replaces the model's for every joint whose name matches one of the patterns.", (
+    Key("joints", "strings", "joint names or shell-style patterns (fnmatch); each must match a joint of the robot",
+        required=True, nonempty=True),
+    Key("lower", "float", "lower position limit in rad or m (1-dof joints; default: the URDF's)"),
+    Key("upper", "float", "upper position limit in rad or m (1-dof joints; default: the URDF's)"),
+    Key("friction", "float", "dry friction torque tau_c in N m or N (0: none; default: the URDF's)", low=0.0),
+    Key("damping", "float", "viscous damping in N m s/rad or N s/m (default: the URDF's)", low=0.0),
+    Key("effort", "float", "actuator effort limit in N m or N (0: none; default: the URDF's)", low=0.0),
+), array=True)
+
+JOINTS = Table("joints", "The joints' own rows of the step problem, from the URDF (`<limit lower upper effort>`, "
+               "`<dynamics friction damping>`; docs/joint-rows.md): position limits as unilateral rows, dry friction "
+               "as box rows |lambda| <= h tau_c (exact stiction), effort limits on feed-forward + PD, damping implicit.",
+               (
+    Key("limits", "bool", "1-dof joints' position limits as unilateral rows (within `limit_margin`)", True),
+    Key("friction", "bool", "dry joint friction as box rows (exact stiction)", True),
+    Key("damping", "bool", "viscous joint damping, implicit in time stepping", True),
+    Key("effort_limits", "bool", "actuator effort limits: |tau_ff + PD| <= effort (box rows with the implicit PD)",
+        True),
+    Key("limit_margin", "float", "rad or m: a limit's row enters the problem within this distance (or when the joint "
+        "would reach it in a step)", 0.02, low=0.0),
+), tables=(JOINT_OVERRIDE,))
+
 INITIAL = Table("initial", "The initial state.", (
     Key("q", "vector", "the full configuration (nq entries; quaternions x, y, z, w, non-zero)"),
     Key("base_velocity", "vector", "free-flyer velocity [vx, vy, vz, wx, wy, wz] (local frame)", length=6),
@@ -210,7 +234,7 @@ SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `bodies` or `[a
         choices=("timestep", "rk4", "ode", "adaptive")),
     Key("delta", "float", "ODE modes: Baumgarte delta in s (0: dt)", 0.0, low=0.0),
     Key("zeta", "float", "ODE modes: Baumgarte zeta", 0.5, low=0.0, low_open=True),
-), tables=(GROUND, CONTACTS, CONTROL, INITIAL, WALLS, ANCHORS, COLLISION, ARRAY, OBJECTS))
+), tables=(GROUND, CONTACTS, CONTROL, JOINTS, INITIAL, WALLS, ANCHORS, COLLISION, ARRAY, OBJECTS))
 
 
 def _where(path: str) -> str:
@@ -384,6 +408,14 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
         for i, g in enumerate(out["control"]["gains"]):
             if g["kp"] is None and g["kd"] is None:
                 raise SceneError(f"control.gains[{i}]: give kp, kd or both (joints {g['joints']} would keep their gains)")
+        for i, o in enumerate(out["joints"]["override"]):
+            if all(o[k] is None for k in ("lower", "upper", "friction", "damping", "effort")):
+                raise SceneError(f"joints.override[{i}]: give at least one of lower, upper, friction, damping, effort")
+            if o["lower"] is not None and o["upper"] is not None and o["lower"] > o["upper"]:
+                raise SceneError(f"joints.override[{i}]: lower = {o['lower']:g} is above upper = {o['upper']:g}")
+        if out["joints"]["override"] and out["robot"] is None and out["urdf"] is None:
+            raise SceneError("joints.override applies to `robot` and `urdf` scenes (the bodies of the others have no "
+                             "joints)")
         for i, a in enumerate(out["anchors"]):
             if a["target"] is not None and a["frame2"] is not None:
                 raise SceneError(f"anchors[{i}]: give `target` or `frame2`, not both")

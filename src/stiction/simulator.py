@@ -54,6 +54,11 @@ class Trajectory:
     timings (N, 5) µs per phase: kinematics+collision, Delassus, solve, integrate, total;
     rows (N, nc) rows each contact used in the step (3 spatial, 2 planar, 1 frictionless or
     mu = 0, 0 inactive; None in files saved before it was recorded).
+    The joints (docs/joint-rows.md): tau (N, nv) the actuator torque applied over the step
+    (feed-forward + PD, the implicit PD's at the step's end, after the effort limit: |tau| never
+    exceeds it); joint_friction (N, nv) the joints' dry friction torque and limit_torque (N, nv) the
+    position limits' torque, 0 where the joint had no such row (all three NaN in record 0; None in
+    files saved before they were recorded).
 
     Record 0 is the state the rollout started from, before any step: its gaps are that state's
     signed distances, its rows the rows each contact would have there, its contact_velocity
@@ -80,6 +85,9 @@ class Trajectory:
     dt: np.ndarray
     timings: np.ndarray
     rows: np.ndarray | None = None
+    tau: np.ndarray | None = None
+    joint_friction: np.ndarray | None = None
+    limit_torque: np.ndarray | None = None
 
     def save(self, path: str | Path) -> None:
         arrays = {k: v for k, v in asdict(self).items() if isinstance(v, np.ndarray)}
@@ -114,7 +122,14 @@ OVERRIDES = {
     "penalty_damping": "penalty formulation: beta in s, damping K beta (default 1e-3)",
     "rigid_body_passes": "fused (default: one pass per robot, a speed choice) | pinocchio (Pinocchio's own "
                          "kinematics, crba, rnea, Cholesky and integrate: the reference)",
+    "joint_limits": "1-dof joints' position limits as unilateral rows (default: the scene's [joints] limits, true)",
+    "joint_friction": "joints' dry friction as box rows (default: the scene's [joints] friction, true)",
+    "joint_damping": "joints' viscous damping, implicit (default: the scene's [joints] damping, true)",
+    "effort_limits": "actuator effort limits (default: the scene's [joints] effort_limits, true)",
 }
+# The [joints] switches and the settings (and overrides) they set.
+_JOINT_SWITCHES = {"joint_limits": "limits", "joint_friction": "friction", "joint_damping": "damping",
+                   "effort_limits": "effort_limits"}
 RIGID_BODY_PASSES = ("fused", "pinocchio")
 
 _MODES = {"timestep": 0, "rk4": 1, "ode": 1, "adaptive": 2}
@@ -232,6 +247,13 @@ class Simulator:
         if not isinstance(passes, str) or passes not in RIGID_BODY_PASSES:
             raise ValueError(f"rigid_body_passes must be one of {', '.join(RIGID_BODY_PASSES)}, got {passes!r}")
         s.rigid_body_passes = passes
+        joints_cfg = (sc.config or {}).get("joints") or {}
+        for setting, key in _JOINT_SWITCHES.items():
+            value = overrides.get(setting, joints_cfg.get(key, True))
+            if not isinstance(value, (bool, np.bool_)):
+                raise ValueError(f"{setting} must be True or False, got {value!r}")
+            setattr(s, setting, bool(value))
+        s.joint_limit_margin = float(joints_cfg.get("limit_margin", 0.02))
         return s
 
     @property
@@ -351,7 +373,8 @@ class Simulator:
             gaps=rec["gaps"].reshape(n, nc), states=_states(rec["states"]).reshape(n, nc),
             residual=rec["residual"], iterations=rec["iterations"].astype(np.int32),
             converged=rec["converged"].astype(bool), dt=rec["dt"], timings=rec["timings"],
-            rows=rec["rows"].astype(np.int8).reshape(n, nc))
+            rows=rec["rows"].astype(np.int8).reshape(n, nc), tau=rec["tau"], joint_friction=rec["joint_friction"],
+            limit_torque=rec["limit_torque"])
 
     def batch_rollout(self, states=None, duration: float | None = None, record_every: int = 1,
                       threads: int | None = None) -> "Batch":
@@ -451,6 +474,7 @@ class Simulator:
                 d = np.linalg.norm(traj.q[after][:, iq:iq + 3] - traj.q[i0, iq:iq + 3], axis=1).max()
                 body_drift = max(body_drift, float(d))
         base_speed, base_sway, settled = _rest_measures(sc.model, traj)
+        joint_measures = _joint_measures(sc.model, self.settings, traj, i0)
         tim = np.median(traj.timings[1:], axis=0) if len(traj.t) > 1 else np.zeros(5)
         # steps taken, not records: rollout(record_every=k) records every k-th step, each record
         # with the step dt that led to it (the adaptive mode records every step)
@@ -486,6 +510,7 @@ class Simulator:
             "final_base_speed": base_speed,
             "final_base_sway": base_sway,
             "settled": settled,
+            **joint_measures,
         }
         # a robot holding a posture whose contacts stick but whose base still moves sways (PD too soft
         # or a start posture off the settled one); one that slides or falls is not warned about
@@ -494,6 +519,33 @@ class Simulator:
         sticking = bool((traj.states[window] == 1).any() and not (traj.states[window] == 2).any())
         out["warnings"] = _warnings(out, swaying=out["settled"] is False and actuated and sticking)
         return out
+
+
+def _joint_measures(model: pin.Model, settings, traj: Trajectory, settled_from: int) -> dict:
+    """The joints' measures of a summary (docs/joint-rows.md): max_limit_overshoot, the farthest a 1-dof
+    joint went past a position limit (rad or m, over every record; 0 with joint_limits off: nothing
+    enforced them); max_joint_drift, the largest motion of a 1-dof joint from where it was at settle_time;
+    max_effort_ratio, the largest |tau| / effort limit of an actuator over the steps (<= 1: the limit holds;
+    None without effort limits); saturated_steps, the steps in which some actuator sat at its limit."""
+    overshoot, drift = 0.0, 0.0
+    effort = np.asarray(model.effortLimit, dtype=float)
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        if joint.nq != 1 or joint.nv != 1:
+            continue
+        q = traj.q[:, joint.idx_q]
+        drift = max(drift, float(np.abs(q[settled_from:] - q[settled_from]).max()))
+        if settings.joint_limits:
+            lower, upper = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
+            overshoot = max(overshoot, float(max(0.0, (lower - q).max(), (q - upper).max())))
+    limited = (effort > 0) & (effort < np.finfo(float).max) if settings.effort_limits else np.zeros(model.nv, bool)
+    ratio, saturated = None, 0
+    if limited.any() and traj.tau is not None and len(traj.t) > 1:
+        r = np.abs(traj.tau[1:, limited]) / effort[limited]
+        ratio = float(r.max())
+        saturated = int((r >= 1.0).any(axis=1).sum())
+    return {"max_limit_overshoot": overshoot, "max_joint_drift": drift, "max_effort_ratio": ratio,
+            "saturated_steps": saturated}
 
 
 def _normalized_configuration(model, q: np.ndarray) -> np.ndarray:

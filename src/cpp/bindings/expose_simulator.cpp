@@ -170,6 +170,16 @@ NdArray get_gaps(const SimulatorData& d) { return readOnlyCopy(d.out.gaps); }
 NdArray get_M(const SimulatorData& d) { return readOnlyCopy(denseMassMatrix(d)); }  // symmetric
 NdArray get_tau(const SimulatorData& d) { return readOnlyCopy(d.out.tau); }
 NdArray get_nle(const SimulatorData& d) { return readOnlyCopy(d.out.nle); }
+NdArray get_actuator_torque(const SimulatorData& d) { return readOnlyCopy(d.out.actuator_torque); }
+NdArray get_friction_torque(const SimulatorData& d) { return readOnlyCopy(d.out.friction_torque); }
+NdArray get_limit_torque(const SimulatorData& d) { return readOnlyCopy(d.out.limit_torque); }
+// The joint rows of the last problem: (kind, velocity coordinate) pairs, kind as its name.
+bp::tuple get_joint_rows(const SimulatorData& d) {
+  static const char* kNames[] = {"lower_limit", "upper_limit", "friction", "effort"};
+  bp::list out;
+  for (const JointRow& r : d.out.joint_rows) out.append(bp::make_tuple(kNames[static_cast<int>(r.kind)], r.dof));
+  return bp::tuple(out);
+}
 NdArray get_candidate_lambda(const SimulatorData& d) { return readOnlyCopy(d.out.candidate_lambda); }
 NdArray get_anchor_lambda(const SimulatorData& d) { return readOnlyCopy(d.out.anchor_lambda); }
 NdArray get_candidate_velocity(const SimulatorData& d) { return readOnlyCopy(d.out.candidate_velocity); }
@@ -259,6 +269,9 @@ bp::dict recordingDict(const Recording& rec) {
   matrix("states", rec.states);
   matrix("rows", rec.rows);
   matrix("anchor_lam", rec.anchor_lam);
+  matrix("tau", rec.tau);
+  matrix("joint_friction", rec.joint_friction);
+  matrix("limit_torque", rec.limit_torque);
   vector("residual", rec.residual);
   vector("iterations", rec.iterations);
   vector("converged", rec.converged);
@@ -433,6 +446,17 @@ void exposeSimulator() {
     checkedMember(c, "warm_start", &SimulatorSettings::warm_start);
     checkedMember(c, "implicit_pd", &SimulatorSettings::implicit_pd,
                   "time stepping: joint PD implicit over the step (stable for any gains)");
+    checkedMember(c, "joint_limits", &SimulatorSettings::joint_limits,
+                  "1-dof joints' position limits (model.lowerPositionLimit, upperPositionLimit) as unilateral rows");
+    checkedMember(c, "joint_friction", &SimulatorSettings::joint_friction,
+                  "joints' dry friction (model.friction) as box rows |lambda| <= tau_c: exact stiction");
+    checkedMember(c, "joint_damping", &SimulatorSettings::joint_damping,
+                  "joints' viscous damping (model.damping), implicit in time stepping as the PD's damping");
+    checkedMember(c, "effort_limits", &SimulatorSettings::effort_limits,
+                  "actuator effort limits (0 < model.effortLimit < inf) on tau_ff + PD: box rows with the implicit PD");
+    checkedMember(c, "joint_limit_margin", &SimulatorSettings::joint_limit_margin,
+                  "rad or m: a position limit's row enters the problem within this distance (or when the "
+                  "joint would reach it in a step)");
     checkedMember(c, "rigid_body_passes", &SimulatorSettings::rigid_body_passes,
                   "'fused' (default: one pass per robot, tree.cpp; a speed choice) or 'pinocchio' (Pinocchio's "
                   "forwardKinematics, crba, nonLinearEffects, Cholesky and integrate: the reference)");
@@ -494,6 +518,16 @@ void exposeSimulator() {
       .add_property("M", &get_M)
       .add_property("tau", &get_tau)
       .add_property("nle", &get_nle, "C(q, v) v + g(q) at the last problem built")
+      .add_property("actuator_torque", &get_actuator_torque,
+                    "nv: the actuators' torque applied over the last step (tau_ff + PD, the implicit PD's at v+, "
+                    "after the effort limit; docs/joint-rows.md)")
+      .add_property("friction_torque", &get_friction_torque,
+                    "nv: the joints' dry friction torque over the last step (0 where a joint has none)")
+      .add_property("limit_torque", &get_limit_torque,
+                    "nv: the joints' position-limit torque over the last step (0 where a joint had no limit row)")
+      .add_property("joint_rows", &get_joint_rows,
+                    "the joints' rows of the last problem, after the contacts and anchors: (kind, velocity "
+                    "coordinate) with kind lower_limit, upper_limit, friction or effort (a tuple)")
       .add_property("active", &get_active, "indices of the candidates in the last problem (a tuple)")
       .add_property("candidate_lambda", &get_candidate_lambda)
       .add_property("anchor_lambda", &get_anchor_lambda)

@@ -131,8 +131,8 @@ std::string notPositiveDefinite(const std::string& robot, const SystemModel& par
 // M of one part (a robot's: already from this step's kinematics, compositeBackwardPass; a free
 // body's: crba), h kd + h^2 kp on its diagonal for an implicit PD over h > 0, and its factor
 // M = U D U^T, in w.data. Throws when M is not positive definite.
-void factorMass(const std::string& robot, const SystemModel& part, SystemWork& w, const JointControl& control,
-                double implicit_pd_step) {
+void factorMass(const std::string& robot, const SimulatorModel& sim, const SystemModel& part, SystemWork& w,
+                const JointControl& control, const std::vector<char>& effort_row, double implicit_pd_step) {
   const pinocchio::Model& model = part.model;
   // q as Eigen::Ref: the instantiation libpinocchio ships (extern template), not a fresh one
   // here (a VectorXd argument made this file take 55 s to compile instead of 14 s).
@@ -142,11 +142,14 @@ void factorMass(const std::string& robot, const SystemModel& part, SystemWork& w
   if (implicit_pd_step > 0.0) {
     // Implicit joint PD over a step h: tau(q+, v+) ~ kp (q_t - q - h v+) + kd (v_t - v+)
     // moves h kd + h^2 kp onto M's diagonal (stable for any gains; MuJoCo's implicitfast
-    // does the damping part). The -h kp v part of tau is added above.
+    // does the damping part). The -h kp v part of tau is added above. An actuator with an effort
+    // row keeps its PD in the row instead (its compliance, joint_rows.cpp); the joint's viscous
+    // damping -d v+ adds h d.
     const double h = implicit_pd_step;
     for (Eigen::Index k = 0; k < model.nv; ++k) {
       const int world = part.v_index[k];
-      w.data.M(k, k) += h * control.kd[world] + h * h * control.kp[world];
+      if (!effort_row[static_cast<std::size_t>(world)]) w.data.M(k, k) += h * control.kd[world] + h * h * control.kp[world];
+      w.data.M(k, k) += h * sim.joint_damping[world];
     }
   }
   // M = U D U^T by Pinocchio's tree-sparse Cholesky (cheaper than a dense LLT)
@@ -179,8 +182,16 @@ bool contactSupport(const pinocchio::Data& data, SystemWork& w) {
 
 void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
                   const Eigen::VectorXd& v, double implicit_pd_step) {
-  computeControl(sim, sd, q, v);  // tau (world coordinates)
-  if (implicit_pd_step > 0.0) sd.out.tau -= implicit_pd_step * sd.control.kp.cwiseProduct(v);
+  (void)q;  // (the control torque at (q, v) is selectJointRows's)
+  // The joints' generalized force: the control torque, but an actuator with an effort row acts through
+  // its row; the implicit PD's -h kp v part (factorMass) and the viscous damping -d v.
+  const std::vector<char>& effort_row = sd.work->effort_row;
+  for (int dof : sim.effort_dofs)
+    if (effort_row[static_cast<std::size_t>(dof)]) sd.out.tau[dof] = 0.0;
+  if (implicit_pd_step > 0.0)
+    for (Eigen::Index i = 0; i < sd.out.tau.size(); ++i)
+      if (!effort_row[static_cast<std::size_t>(i)]) sd.out.tau[i] -= implicit_pd_step * sd.control.kp[i] * v[i];
+  if (!sim.joint_damping.isZero(0.0)) sd.out.tau -= sim.joint_damping.cwiseProduct(v);
   for (std::size_t s = 0; s < sim.systems.size(); ++s) {
     const SystemModel& part = sim.systems[s];
     const pinocchio::Model& model = part.model;
@@ -190,7 +201,9 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
     // tree Cholesky every step.
     bool pd_on_diagonal = false;
     if (implicit_pd_step > 0.0)
-      for (int world : part.v_index) pd_on_diagonal = pd_on_diagonal || sd.control.kd[world] != 0.0 || sd.control.kp[world] != 0.0;
+      for (int world : part.v_index)
+        pd_on_diagonal = pd_on_diagonal || sd.control.kd[world] != 0.0 || sd.control.kp[world] != 0.0 ||
+                         sim.joint_damping[world] != 0.0;
     const bool reuse = part.free_body && w.mass_factored && !pd_on_diagonal;
     w.mass_factored = part.free_body && !pd_on_diagonal;
     if (part.pinocchio_passes)  // (M by crba in factorMass)
@@ -199,7 +212,7 @@ void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::Vec
     else if (!part.free_body)
       compositeBackwardPass(part, w.data, w.nle);  // M and nle (stage 1's terms)
     if (!reuse) {
-      factorMass(sim.model.name, part, w, sd.control, implicit_pd_step);
+      factorMass(sim.model.name, sim, part, w, sd.control, sd.work->effort_row, implicit_pd_step);
       w.has_free_body_scaling = part.free_body;
       if (part.free_body) freeBodyScaling(w);
     }
@@ -470,6 +483,7 @@ bool planAssembly(const SimulatorModel& sim, SimulatorData& sd, bool dense) {
     row += sd.out.candidate_rows[i];
   }
   for (std::size_t a = 0; a < sim.anchors.size(); ++a, row += 3) start.push_back(row);
+  for (std::size_t k = 0; k < sd.out.joint_rows.size(); ++k, row += 1) start.push_back(row);
   start.push_back(row);
   if (row != rows) return false;
   const auto blocks = static_cast<int>(start.size()) - 1;

@@ -209,6 +209,10 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
     reserveRows(sim, sd, anchorBodies(sim, a), rows, 3);
     rows += 3;
   }
+  for (const JointRow& r : sd.out.joint_rows) {  // one row in the part of its coordinate
+    sd.work->parts[static_cast<std::size_t>(sim.dof_part[static_cast<std::size_t>(r.dof)])].rows.push_back(static_cast<int>(rows));
+    rows += 1;
+  }
   sd.out.rows = rows;
   for (std::size_t s = 0; s < sd.work->parts.size(); ++s) {
     SystemWork& w = sd.work->parts[s];
@@ -337,6 +341,18 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
                                               : Eigen::Vector3d::Zero());
     sd.out.position_error.segment<3>(row) = jointPlacement(sim, sd, bodies.plus).act(point_j) - other;
     row += 3;
+  }
+  // The joints' rows (joint_rows.cpp): J = +-e_dof, no drift; a limit's gap as the position error.
+  for (const JointRow& r : sd.out.joint_rows) {
+    const auto s = static_cast<std::size_t>(sim.dof_part[static_cast<std::size_t>(r.dof)]);
+    SystemWork& w = sd.work->parts[s];
+    const int lr = sd.work->part_fill[s]++;
+    w.J.row(lr).setZero();
+    const bool upper = r.kind == JointRowKind::kUpperLimit;
+    w.J(lr, sim.dof_local[static_cast<std::size_t>(r.dof)]) = upper ? -1.0 : 1.0;
+    sd.out.drift[row] = 0.0;
+    sd.out.position_error[row] = r.gap;
+    row += 1;
   }
 }
 

@@ -144,6 +144,56 @@ void splitIntoSystems(const pinocchio::Model& world, bool fused, std::vector<Sys
   }
 }
 
+
+// The joints' rows (docs/joint-rows.md) from the model's limits, friction, effort limits and
+// damping, as the settings switch them on; each value checked (a NaN or a negative friction is an
+// error naming the joint, never a silent default).
+void deriveJointRows(const pinocchio::Model& model, const SimulatorSettings& s, std::vector<JointLimit>& limits,
+                     Eigen::VectorXd& friction, Eigen::VectorXd& effort, Eigen::VectorXd& damping,
+                     std::vector<int>& friction_dofs, std::vector<int>& effort_dofs) {
+  if (!(s.joint_limit_margin >= 0.0) || !std::isfinite(s.joint_limit_margin))
+    throw std::invalid_argument("joint_limit_margin must be finite and >= 0");
+  const int nv = model.nv;
+  friction = Eigen::VectorXd::Zero(nv);
+  effort = Eigen::VectorXd::Zero(nv);
+  damping = Eigen::VectorXd::Zero(nv);
+  const auto fail = [&](pinocchio::JointIndex j, const std::string& what, double value) {
+    std::ostringstream os;
+    os.precision(17);
+    os << "joint '" << model.names[j] << "': " << what << " = " << value;
+    throw std::invalid_argument(os.str());
+  };
+  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j) {
+    const int iv = model.idx_vs[j], iq = model.idx_qs[j];
+    for (int k = 0; k < model.nvs[j]; ++k) {
+      const double f = model.friction[iv + k], d = model.damping[iv + k], e = model.effortLimit[iv + k];
+      if (!(f >= 0.0) || !std::isfinite(f)) fail(j, "friction (model.friction, URDF <dynamics friction>) must be finite and >= 0, got", f);
+      if (!(d >= 0.0) || !std::isfinite(d)) fail(j, "damping (model.damping, URDF <dynamics damping>) must be finite and >= 0, got", d);
+      if (!(e >= 0.0)) fail(j, "effort limit (model.effortLimit, URDF <limit effort>) must be >= 0 (0 or inf: none), got", e);
+      if (s.joint_friction && f > 0.0) {
+        friction[iv + k] = f;
+        friction_dofs.push_back(iv + k);
+      }
+      if (s.joint_damping) damping[iv + k] = d;
+      // (0, inf and Pinocchio's "unbounded" max double, a free flyer's: no limit)
+      if (s.effort_limits && e > 0.0 && e < std::numeric_limits<double>::max()) {
+        effort[iv + k] = e;
+        effort_dofs.push_back(iv + k);
+      }
+    }
+    if (!s.joint_limits || model.nqs[j] != 1 || model.nvs[j] != 1) continue;  // 1-dof joints (revolute, prismatic)
+    const double lo = model.lowerPositionLimit[iq], hi = model.upperPositionLimit[iq];
+    if (std::isnan(lo) || std::isnan(hi) || lo > hi) {
+      std::ostringstream os;
+      os.precision(17);
+      os << "joint '" << model.names[j] << "': position limits [" << lo << ", " << hi
+         << "] (model.lowerPositionLimit, upperPositionLimit): need lower <= upper, not NaN";
+      throw std::invalid_argument(os.str());
+    }
+    if (!std::isfinite(lo) && !std::isfinite(hi)) continue;
+    limits.push_back({j, iq, iv, lo, hi});
+  }
+}
 }  // namespace
 
 SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfSpace> halfspaces_,
@@ -246,6 +296,15 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
     for (int k = 0; k < g.max_contacts; ++k) slot_pair.push_back(static_cast<int>(p));
   }
   num_candidates = static_cast<int>(slot_pair.size());
+  deriveJointRows(model, settings, joint_limits, joint_friction, effort_limit, joint_damping, friction_dofs, effort_dofs);
+  dof_part.assign(static_cast<std::size_t>(model.nv), -1);
+  dof_local.assign(static_cast<std::size_t>(model.nv), -1);
+  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+    for (int k = 0; k < model.nvs[j]; ++k) {
+      const int s_j = joint_system[j];
+      dof_part[static_cast<std::size_t>(model.idx_vs[j] + k)] = s_j;
+      dof_local[static_cast<std::size_t>(model.idx_vs[j] + k)] = systems[s_j].model.idx_vs[joint_local[j]] + k;
+    }
   for (const pinocchio::GeometryObject& object : geometry.geometryObjects) {
     const coal::NODE_TYPE type = object.geometry->getNodeType();
     if (type == coal::GEOM_HALFSPACE || type == coal::GEOM_PLANE) {
@@ -294,6 +353,11 @@ SimulatorWorkspace::SimulatorWorkspace(const SimulatorModel& sim)
   zero_nv = Eigen::VectorXd::Zero(nv);
   v_free.resize(nv);
   dv.resize(nv);
+  effort_row.assign(static_cast<std::size_t>(nv), 0);
+  forced_effort.assign(static_cast<std::size_t>(nv), 0);
+  forced_limit.assign(sim.joint_limits.size(), 0);
+  effort_c = Eigen::VectorXd::Zero(nv);
+  effort_k = Eigen::VectorXd::Zero(nv);
 }
 
 SimulatorData::SimulatorData(const SimulatorModel& sim)
@@ -318,6 +382,9 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
   out.candidate_velocity = Eigen::MatrixXd::Zero(3, nc);
   out.candidate_states.assign(nc, ContactState::kOpen);
   out.candidate_rows.assign(nc, 0);
+  out.actuator_torque = Eigen::VectorXd::Zero(nv);
+  out.friction_torque = Eigen::VectorXd::Zero(nv);
+  out.limit_torque = Eigen::VectorXd::Zero(nv);
 }
 
 SimulatorData::~SimulatorData() = default;

@@ -53,7 +53,9 @@ int blockChainEnd(const pinocchio::Data& data, int a, int b) {
 // block's bodies are not on one root path. Kept while the active contacts are the same.
 bool planChains(const SimulatorModel& sim, const SimulatorData& sd, const pinocchio::Data& data,
                 RobotOperatorPlan& plan) {
-  if (plan.valid && plan.active == sd.out.active && plan.anchors == sim.anchors.size()) return true;
+  if (plan.valid && plan.active == sd.out.active && plan.anchors == sim.anchors.size() &&
+      plan.joint_rows == sd.out.joint_rows)
+    return true;
   plan.valid = false;
   plan.blocks.clear();
   plan.chain.clear();
@@ -79,6 +81,8 @@ bool planChains(const SimulatorModel& sim, const SimulatorData& sd, const pinocc
                                   a.frame2 != 0 ? deepestCoordinate(sim, sim.model.frames[a.frame2].parentJoint) : -1);
     if (!add(3, end)) return false;
   }
+  for (const JointRow& r : sd.out.joint_rows)  // J = +-e_dof: the chain of the coordinate itself
+    if (!add(1, sim.dof_local[static_cast<std::size_t>(r.dof)])) return false;
   const std::size_t blocks = plan.blocks.size();
   plan.prefix.resize(blocks * blocks);
   for (std::size_t f = 0; f < blocks; ++f)
@@ -90,6 +94,7 @@ bool planChains(const SimulatorModel& sim, const SimulatorData& sd, const pinocc
     }
   plan.active = sd.out.active;
   plan.anchors = sim.anchors.size();
+  plan.joint_rows = sd.out.joint_rows;
   plan.valid = true;
   return true;
 }

@@ -33,6 +33,9 @@ std::vector<Array> arrays(const SimulatorModel& sim) {
           {"states", nullptr, &R::states, nc},
           {"rows", nullptr, &R::rows, nc},
           {"anchor_lam", nullptr, &R::anchor_lam, 3 * na},
+          {"tau", nullptr, &R::tau, sim.model.nv},
+          {"joint_friction", nullptr, &R::joint_friction, sim.model.nv},
+          {"limit_torque", nullptr, &R::limit_torque, sim.model.nv},
           {"residual", &R::residual, nullptr, -1},
           {"iterations", &R::iterations, nullptr, -1},
           {"converged", &R::converged, nullptr, -1},
@@ -115,6 +118,15 @@ void Recording::record(const SimulatorModel& sim, const SimulatorData& d, bool i
       anchor_lam.block<1, 3>(r, 3 * a).setConstant(kNaN);
     else
       anchor_lam.block<1, 3>(r, 3 * a) = d.out.anchor_lambda.col(a).transpose();
+  }
+  if (initial) {  // (the torques of the step that led here: none)
+    tau.row(r).setConstant(kNaN);
+    joint_friction.row(r).setConstant(kNaN);
+    limit_torque.row(r).setConstant(kNaN);
+  } else {
+    tau.row(r) = d.out.actuator_torque.transpose();
+    joint_friction.row(r) = d.out.friction_torque.transpose();
+    limit_torque.row(r) = d.out.limit_torque.transpose();
   }
   residual[r] = d.out.max_residual_step;
   iterations[r] = d.out.iterations_step;

@@ -31,7 +31,9 @@ std::string blockName(const SimulatorModel& sim, const SimulatorData& sd, int bl
     for (int p = 0; p < sim.slot_pair[i]; ++p) slot -= sim.pairs[p].max_contacts;
     return "contact '" + sim.pairs[sim.slot_pair[i]].name + "#" + std::to_string(slot) + "'";
   }
-  return "anchor '" + sim.anchors[blk - sd.out.active.size()].name + "'";
+  const std::size_t anchor = static_cast<std::size_t>(blk) - sd.out.active.size();
+  if (anchor < sim.anchors.size()) return "anchor '" + sim.anchors[anchor].name + "'";
+  return jointRowName(sim, sd, anchor - sim.anchors.size());
 }
 
 // Why a step cannot go on: the contact problem has no solution, or none double
@@ -86,9 +88,12 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
         default: cons.push_back(Constraint::spatialFriction(candidateMu(sim, i)));
       }
     for (std::size_t a = 0; a < sim.anchors.size(); ++a) cons.push_back(Constraint::bilateral(3));
+    for (std::size_t k = 0; k < sd.out.joint_rows.size(); ++k) cons.push_back(jointRowConstraint(sim, sd, k, scale));
     return cons;
   };
-  const bool same_blocks = sd.work->problem && sd.out.active == sd.work->problem_active;
+  // (a joint row's bounds are h tau: the same while its kind, coordinate and h are; ODE modes scale 1)
+  const bool same_blocks = sd.work->problem && sd.out.active == sd.work->problem_active &&
+                           sd.out.joint_rows == sd.work->problem_joint_rows && sd.work->problem_scale == scale;
   if (sd.out.sparse && same_blocks && sd.work->sparse_delassus && sd.work->operator_pattern_version == sd.work->pattern_version &&
       sd.work->sparse_delassus->swapValues(sd.out.A_sparse)) {
     // the pattern the operator was built with (A assembled by its plan since): the new values
@@ -105,11 +110,15 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     sd.work->operator_pattern_version = sd.work->pattern_version;
     sd.work->problem = std::make_unique<ContactProblem>(sd.work->sparse_delassus, scale * sd.out.b, constraints(), 1e-6, false);
     sd.work->problem_active = sd.out.active;
+    sd.work->problem_joint_rows = sd.out.joint_rows;
+    sd.work->problem_scale = scale;
   } else if (!same_blocks || !sd.work->delassus) {
     sd.work->sparse_delassus.reset();
     sd.work->delassus = std::make_shared<DenseDelassus>(sd.out.A);
     sd.work->problem = std::make_unique<ContactProblem>(sd.work->delassus, scale * sd.out.b, constraints(), 1e-6, false);
     sd.work->problem_active = sd.out.active;
+    sd.work->problem_joint_rows = sd.out.joint_rows;
+    sd.work->problem_scale = scale;
   } else {
     sd.work->delassus->matrix() = sd.out.A;
     sd.work->b_scaled = scale * sd.out.b;
@@ -146,6 +155,10 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   for (std::size_t a = 0; a < sim.anchors.size(); ++a, row += 3) {
     sd.work->guess.segment<3>(row) = scale * sd.out.anchor_lambda.col(a);
     any = any || sd.out.anchor_lambda.col(a).squaredNorm() > 0.0;
+  }
+  for (std::size_t k = 0; k < sd.out.joint_rows.size(); ++k, ++row) {
+    sd.work->guess[row] = jointRowGuess(sim, sd, k, scale);
+    any = any || sd.work->guess[row] != 0.0;
   }
   settings.warm_start = sim.settings.warm_start && any ? WarmStart::kGiven : WarmStart::kNone;
   if (!exact) {  // what the other formulations may know of the step (formulation.hpp)

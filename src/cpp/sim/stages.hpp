@@ -63,6 +63,34 @@ void freeBodyKinematics(const pinocchio::Model& model, SystemWork& w);
 /// set (active, candidate_rows) of those within the activation distance.
 void detectContacts(const SimulatorModel& sim, SimulatorData& sd);
 
+/// 2b. The joints' rows at (q, v) (joint_rows.cpp, docs/joint-rows.md), after the control torque
+/// sd.out.tau at (q, v) (computeControl): every coordinate with dry friction; each 1-dof joint's limit
+/// within the margin or about to cross it in a step; with the implicit PD over h > 0, the actuators
+/// with an effort limit near saturation (|tau| >= half the limit now or at the last step), whose PD
+/// then leaves M's diagonal for the row. Every other effort-limited actuator's torque is clamped here
+/// when the PD is explicit (h = 0) or absent (kp = kd = 0). Plus the rows forced by a repeated pass.
+void selectJointRows(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q, const Eigen::VectorXd& v,
+                     double implicit_pd_step);
+
+/// 4d. Time stepping with effort rows: each row's compliance 1 / (h K) on A's diagonal and c / (h K) in
+/// b, so that u = v+_j + P / (h K) - c / K: the row's impulse is h (c - K v+_j), the implicit PD's,
+/// strictly inside its bounds, and saturates at them (eq. 65 with C = [-h e, h e]).
+void addActuatorCompliance(const SimulatorModel& sim, SimulatorData& sd, double h);
+
+/// The constraint of joint row k of the problem (bounds scaled by `scale`: h for impulses) and its warm
+/// start from the last step's torques (clamped into the bounds).
+Constraint jointRowConstraint(const SimulatorModel& sim, const SimulatorData& sd, std::size_t k, double scale);
+double jointRowGuess(const SimulatorModel& sim, const SimulatorData& sd, std::size_t k, double scale);
+/// "joint 'name' lower limit", "... friction", "... actuator"
+std::string jointRowName(const SimulatorModel& sim, const SimulatorData& sd, std::size_t k);
+
+/// After the solve and, in time stepping (h > 0), the integration from v0 to v+ = sd.v: the applied
+/// actuator, friction and limit torques (sd.out.actuator_torque, friction_torque, limit_torque; the
+/// implicit PD's at v+). Time stepping: false when an actuator without a row saturated or a joint
+/// without a limit row crossed its limit; that row is then forced and the step must be repeated.
+bool finishJointRows(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v0, double h,
+                     double implicit_pd_step);
+
 /// 3. The rows of the active contacts, then of the anchors: J (t1, t2, n per contact),
 /// drift J' v, position_error Psi (gap on normal rows, anchor error), tangent_row.
 void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v);

@@ -178,6 +178,7 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
   Stopwatch watch;
   forwardKinematics(sim, sd, q, v);
   detectContacts(sim, sd);
+  selectJointRows(sim, sd, q, v, implicit_pd_step);
   contactJacobians(sim, sd, v);
   watch.lap(sd.out.timings.kinematics);
   freeDynamics(sim, sd, q, v, implicit_pd_step);
@@ -199,6 +200,7 @@ void contactsAtState(const SimulatorModel& sim, SimulatorData& sd) {
   }
   forwardKinematics(sim, sd, sd.q, sd.v);
   detectContacts(sim, sd);
+  selectJointRows(sim, sd, sd.q, sd.v, 0.0);
   contactJacobians(sim, sd, sd.v);
   for (std::size_t p = 0; p < sim.pairs.size(); ++p) {
     coal::CollisionRequest& req = sd.work->geometry_data.collisionRequests[sim.pairs[p].pair];
@@ -215,25 +217,50 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
   switch (sim.settings.mode) {
     case IntegrationMode::kTimeStepping: {  // eq. 70: delta = h, zeta = 1/2, impulses P = h lambda
       const double h = sim.settings.dt;
+      const double pd_step = sim.settings.implicit_pd ? h : 0.0;
       Stopwatch watch(start);  // (beginStep's few ns go to the kinematics)
       forwardKinematics(sim, sd, sd.q, sd.v);  // placements, J' v, joint Jacobians
       detectContacts(sim, sd);                 // gaps, the active set
-      contactJacobians(sim, sd, sd.v);         // J, drift J' v, Psi
-      watch.lap(sd.out.timings.kinematics);
-      freeDynamics(sim, sd, sd.q, sd.v, sim.settings.implicit_pd ? h : 0.0);  // M = U D U^T, M^-1 (tau - nle)
-      delassusOperator(sim, sd);                                               // A = J M^-1 J^T
-      rightHandSide(sim, sd, sd.v, h, 0.5, /*tangential_drift=*/false);        // b (eq. 27)
-      watch.lap(sd.out.timings.delassus);
-      solveContacts(sim, sd, h);  // A P - h b in -N(P), by the formulation
-      watch.lap(sd.out.timings.solve);
-      integrateTimeStep(sim, sd, h);  // v+, then q+
-      watch.lap(sd.out.timings.integrate);
+      // (v0: the applied PD torque at v+ needs it; a repeated pass restarts from (q0, v0, t0))
+      const bool repeatable = !sim.joint_limits.empty() || !sim.effort_dofs.empty();
+      const double t0 = sd.t;
+      sd.work->step_v0 = sd.v;
+      if (repeatable) {
+        sd.work->step_q0 = sd.q;
+        std::fill(sd.work->forced_effort.begin(), sd.work->forced_effort.end(), 0);
+        std::fill(sd.work->forced_limit.begin(), sd.work->forced_limit.end(), 0);
+      }
+      // A pass misses a row only when an actuator without one saturates or a joint without a limit
+      // row crosses its limit (joint_rows.cpp): that row is added and the step repeated, at most
+      // once per limit side and actuator (rows are only added).
+      for (int pass = 0;; ++pass) {
+        selectJointRows(sim, sd, sd.q, sd.v, pd_step);  // the control torque, the joints' rows
+        contactJacobians(sim, sd, sd.v);                // J, drift J' v, Psi
+        watch.lap(sd.out.timings.kinematics);
+        freeDynamics(sim, sd, sd.q, sd.v, pd_step);                        // M = U D U^T, M^-1 (tau - nle)
+        delassusOperator(sim, sd);                                         // A = J M^-1 J^T
+        rightHandSide(sim, sd, sd.v, h, 0.5, /*tangential_drift=*/false);  // b (eq. 27)
+        if (pd_step > 0.0) addActuatorCompliance(sim, sd, h);              // effort rows
+        watch.lap(sd.out.timings.delassus);
+        solveContacts(sim, sd, h);  // A P - h b in -N(P), by the formulation
+        watch.lap(sd.out.timings.solve);
+        integrateTimeStep(sim, sd, h);  // v+, then q+
+        watch.lap(sd.out.timings.integrate);
+        if (finishJointRows(sim, sd, sd.work->step_v0, h, pd_step) || !repeatable) break;
+        if (pass > 2 * static_cast<int>(sim.joint_limits.size() + sim.effort_dofs.size()) + 2)
+          throw std::logic_error("joint rows: the repeated passes of a step did not settle");  // (cannot happen)
+        sd.q = sd.work->step_q0;
+        sd.v = sd.work->step_v0;
+        sd.t = t0;
+      }
       break;
     }
     // The relaxed DAI as an ODE: buildContactProblem and solveContacts at every RHS evaluation.
     case IntegrationMode::kRK4: integrateRK4(sim, sd); break;
     case IntegrationMode::kAdaptive: integrateAdaptive(sim, sd); break;
   }
+  // ODE modes: the joints' torques of the last right-hand side (the actuators' explicit, clamped)
+  if (sim.settings.mode != IntegrationMode::kTimeStepping) finishJointRows(sim, sd, sd.v, 0.0, 0.0);
   endStep(sim, sd, first);  // finite, not blown up; contact velocities J v
   sd.out.timings.total = microseconds(start, Clock::now());
 }

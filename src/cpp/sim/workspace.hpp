@@ -47,9 +47,10 @@ struct RobotOperatorPlan {
   std::vector<int> prefix;      ///< blocks x blocks (f <= g): the length of their common chain
   std::vector<double> scale;    ///< sqrt(D^-1) per coordinate
   std::vector<double> Y;        ///< 4 values per chain entry: the block's values, zero-padded
-  bool valid = false;           ///< the plan holds for these active contacts and anchors:
+  bool valid = false;           ///< the plan holds for these active contacts, anchors and joint rows:
   std::vector<int> active;
   std::size_t anchors = 0;
+  std::vector<JointRow> joint_rows;
 };
 
 /// The workspace of one part: its Pinocchio Data, its coordinates, and its columns of the
@@ -137,6 +138,8 @@ struct SimulatorWorkspace {
   // read later), the formulation itself and its warm start.
   std::unique_ptr<ContactProblem> problem;
   std::vector<int> problem_active;
+  std::vector<JointRow> problem_joint_rows;
+  double problem_scale = 0.0;
   std::unique_ptr<ContactSolver> solver;
   SolverResult cold_result;     ///< the retry from zero after a warm-started solve missed
   Eigen::VectorXd guess, b_scaled;
@@ -147,6 +150,15 @@ struct SimulatorWorkspace {
   Eigen::VectorXd q_tmp, row_velocity;
   std::vector<Eigen::VectorXd> stage_v, stage_a, stage_k;
   Eigen::VectorXd ode_q0, ode_v0, ode_theta, ode_bracket, ode_bracket2, ode_q3, ode_v3, ode_theta3, ode_theta2, ode_v2;
+
+  // Joint rows (joint_rows.cpp): per coordinate, its actuator is a row of this step's problem
+  // (effort_row), with the PD's c = tau_ff + kp (q_t - q) + kd v_t and K = kd + h kp (the row's
+  // compliance 1 / (h K)); rows forced into the step after a pass without them saturated an actuator
+  // or crossed a limit, and the state such a pass restarts from.
+  std::vector<char> effort_row, forced_effort, forced_limit;
+  Eigen::VectorXd effort_c, effort_k;
+  Eigen::VectorXd step_q0, step_v0;
+  Eigen::VectorXd control_torque;  ///< the control torque at the step's start (computeControl, clamped)
 
   Eigen::VectorXd row_scratch;  ///< one value per row
   Eigen::VectorXd nv_scratch;   ///< one value per velocity coordinate

@@ -119,6 +119,46 @@ struct SimulatorSettings {
   /// solve, integrate and difference for every part: the reference the fused passes are checked
   /// against, docs/simulator.md).
   std::string rigid_body_passes = "fused";
+  /// The joints' own rows of the step problem (docs/joint-rows.md), each from the Pinocchio model
+  /// (the URDF's <limit lower upper effort> and <dynamics friction damping>):
+  /// position limits of 1-dof joints as unilateral rows, beside the contacts, within
+  /// `joint_limit_margin` of a limit (or about to cross it in the step);
+  bool joint_limits = true;
+  /// dry friction (model.friction > 0) as box rows |lambda| <= tau_c (exact stiction);
+  bool joint_friction = true;
+  /// viscous damping (model.damping) implicit in the step, as the PD's damping is;
+  bool joint_damping = true;
+  /// actuator effort limits (0 < model.effortLimit < inf): |feed-forward + PD| <= effortLimit. With the
+  /// implicit PD (time stepping) the actuator's impulse is a box row of the problem with the PD as its
+  /// compliance, for the joints near saturation; else the torque is clamped.
+  bool effort_limits = true;
+  double joint_limit_margin = 0.02;  ///< rad or m: a limit's row enters the problem within this distance
+};
+
+/// A 1-dof joint's position limits (either finite; model.lowerPositionLimit, upperPositionLimit).
+struct JointLimit {
+  pinocchio::JointIndex joint = 0;
+  int idx_q = 0, idx_v = 0;
+  double lower = 0.0, upper = 0.0;  ///< -inf / +inf: no limit on that side
+};
+
+/// The kinds of a joint's row of the step problem (after the contacts and anchors).
+enum class JointRowKind {
+  kLowerLimit = 0,  ///< unilateral, J = +e_dof, gap q - lower
+  kUpperLimit = 1,  ///< unilateral, J = -e_dof, gap upper - q
+  kFriction = 2,    ///< box |lambda| <= tau_c, J = e_dof (the joint velocity)
+  kEffort = 3,      ///< box |lambda| <= effortLimit: the actuator torque, the implicit PD its compliance
+};
+
+/// One joint row of the last problem: its kind, velocity coordinate and (limits) the index into
+/// SimulatorModel::joint_limits.
+struct JointRow {
+  JointRowKind kind = JointRowKind::kFriction;
+  int dof = 0;
+  int limit = -1;
+  double gap = 0.0;  ///< limits: the distance to the limit at the problem's state (q - lower, upper - q)
+  /// the same row (its gap aside)
+  bool operator==(const JointRow& o) const { return kind == o.kind && dof == o.dof && limit == o.limit; }
 };
 
 /// Joint-space control: tau = kp (q_target - q) + kd (v_target - v) + tau_ff on
@@ -220,6 +260,13 @@ class SimulatorModel {
   /// skips coal.
   std::vector<Eigen::Vector3d> geometry_center;
   std::vector<double> geometry_radius;
+  /// The joints' rows (settings.joint_limits, joint_friction, effort_limits; docs/joint-rows.md):
+  /// the limited 1-dof joints, and per velocity coordinate its dry friction tau_c, effort limit
+  /// (0: none) and viscous damping (0 when off).
+  std::vector<JointLimit> joint_limits;
+  Eigen::VectorXd joint_friction, effort_limit, joint_damping;
+  std::vector<int> friction_dofs, effort_dofs;  ///< the coordinates with friction, with an effort limit
+  std::vector<int> dof_part, dof_local;  ///< per world velocity coordinate: its part and local coordinate
 };
 
 /// Microseconds spent per phase in the last step (summed over RHS evaluations in ODE modes).
@@ -252,7 +299,9 @@ struct SimulatorOutputs {
   Eigen::VectorXd drift;             ///< J' v per row
   Eigen::VectorXd position_error;    ///< Psi per row (gap on normal rows, anchor error; 0 else)
   Eigen::VectorXd tangent_row;       ///< 1 on tangential rows, 0 on normal and anchor rows
-  Eigen::VectorXd tau;               ///< nv: the control torque at the last problem built
+  /// nv: the joints' generalized force in the last problem's dynamics (M v_free = tau - nle): the
+  /// control torque of the actuators without an effort row, minus the implicit PD's h kp v and the damping
+  Eigen::VectorXd tau;
   Eigen::VectorXd nle;               ///< nv: C(q, v) v + g(q) at the last problem built
   Eigen::VectorXd gaps;              ///< signed distance per candidate contact
   Eigen::VectorXd lambda;            ///< forces per row of the last solve
@@ -267,6 +316,12 @@ struct SimulatorOutputs {
   std::vector<int> candidate_rows;   ///< rows of each candidate in the last problem (0: inactive)
   std::vector<ContactState> candidate_states;
   Eigen::MatrixXd anchor_lambda;     ///< 3 x anchors
+  /// The joint rows of the last problem (after the anchors, one row each; their forces in `lambda`).
+  std::vector<JointRow> joint_rows;
+  /// nv, after the last step: the actuator torque applied (feed-forward + PD at the step's end, after
+  /// saturation; 0 where nothing acts), the joints' dry friction torque and position limits' torque (0
+  /// where the joint had no such row). Time stepping: the step's impulses / h.
+  Eigen::VectorXd actuator_torque, friction_torque, limit_torque;
   Eigen::MatrixXd candidate_spring;  ///< penalty: tangential spring elongation e_t per candidate (t1, t2, 0)
   Eigen::MatrixXd candidate_velocity;  ///< 3 x candidates, contact velocity J v after the step
   /// coal pairs: the contact each slot holds now (per candidate; pair slots only)
