@@ -262,6 +262,7 @@ def test_mixed_problems_exercise_both_bounds_and_the_interior():
         rng.shuffle(kinds)
         p = random_problem(rng, list(kinds), dofs=16)
         r = solve(p)
+        assert r.converged and check_box_complementarity(p, r.lam, 1e-10) == 4  # (a lambda checked here)
         for i, c in enumerate(p.constraints):
             if c.kind == stiction.ConstraintKind.box:
                 l = r.lam[p.offsets[i]]
