@@ -382,15 +382,7 @@ def test_fclib_writer_refuses_box_rows(tmp_path):
     assert not (tmp_path / "p.hdf5").exists()
 
 
-def test_dump_refuses_a_step_with_rows_besides_its_contacts():
-    from stiction.dump import step_problem
-
-    # a step whose problem holds one contact (3 rows) and two joint box rows
-    data = types.SimpleNamespace(active=[0], rows=[3], A=np.eye(5), b=np.ones(5), last_dt=1e-3)
-    model = types.SimpleNamespace(num_anchors=0, settings=types.SimpleNamespace(mode=_core.IntegrationMode.timestep))
-    sim = types.SimpleNamespace(data=data, model=model, contact_names=["c0"])
-    with pytest.raises(ValueError, match="FCLib has no box blocks"):
-        step_problem(sim)
+# (a step with joint rows refused by stiction dump: tests/test_dump.py, test_dump_refuses_joint_rows)
 
 
 # ------------------------------------------------------------------ Python API

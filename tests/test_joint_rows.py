@@ -197,6 +197,9 @@ def test_saturated_step_satisfies_the_dynamics_with_the_recorded_torque():
     tau = traj.tau[1]
     assert (np.abs(tau[6:]) == 2.7).any()
     J, P = np.asarray(sim.data.J), np.asarray(sim.data.result.lam)
+    contact_rows = J.shape[0] - len(sim.data.joint_rows)  # (the joint rows' impulses are the recorded torques)
+    assert len(sim.data.joint_rows) > 0
+    J, P = J[:contact_rows], P[:contact_rows]
     data = model.createData()
     M = pin.crba(model, data, q0)
     M = np.triu(M) + np.triu(M, 1).T
@@ -204,8 +207,11 @@ def test_saturated_step_satisfies_the_dynamics_with_the_recorded_torque():
     h = sim.dt
     turn = np.zeros(model.nv)
     turn[:3] = h * np.cross(v0[3:6], v0[:3])  # the base's frame turn (integrate.cpp)
-    # v+ before the base's frame re-expression: the recorded v's joint part is unaffected
-    lhs = (M @ (traj.v[1] - v0 - turn))[6:]
+    # v+ as the solve left it: the recorded base linear velocity is re-expressed in the base's frame after
+    # its turn by h omega (integrate.cpp); turned back here
+    v1 = traj.v[1].copy()
+    v1[:3] = pin.exp3(h * v1[3:6]) @ v1[:3]
+    lhs = (M @ (v1 - v0 - turn))[6:]
     rhs = (h * (tau - nle) + J.T @ P)[6:]
     assert np.abs(lhs - rhs).max() <= 1e-9 * np.abs(rhs).max()
 
@@ -221,6 +227,22 @@ def test_feed_forward_alone_is_clamped():
     assert np.all(traj.tau[1:, 0] == 3.0)
     inertia = pin.crba(sim.scene.model, sim.scene.model.createData(), np.zeros(1))[0, 0]
     assert abs(traj.v[1, 0] / sim.dt - 3.0 / inertia) <= 1e-12 * 3.0 / inertia
+
+
+def test_solo12_standing_with_every_joint_row():
+    """solo12-stand-joint-rows: limits, dry friction on all 12 joints and effort limits beside the 4 foot
+    contacts. Every step converges; the contacts carry the weight (sum of normal forces = m g); once
+    settled, no joint moves at all (friction holds them: exact stiction) and no foot slips."""
+    sim = Simulator("solo12-stand-joint-rows")
+    traj = sim.rollout(2.0)
+    assert traj.converged[1:].all()
+    model = sim.scene.model
+    assert sorted(kind for kind, _ in sim.data.joint_rows).count("friction") == 12
+    mass = sum(model.inertias[j].mass for j in range(1, model.njoints))
+    assert abs(traj.lam[-1, :, 2].sum() - mass * G) <= 1e-6 * mass * G
+    summary = sim.summary(traj)
+    assert summary["max_joint_drift"] <= 1e-12 and summary["max_foot_slip"] <= 1e-9
+    assert np.all(np.abs(traj.joint_friction[1:, 6:]) <= 0.03)
 
 
 # ---- scene keys

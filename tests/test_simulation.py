@@ -323,7 +323,9 @@ def test_implicit_pd_keeps_stiff_gains_stable():
     explicit = Simulator("talos-stand")
     s = explicit.model.settings
     s.implicit_pd = False
-    s.effort_limits = False  # (TALOS's effort limits would bound the explicit PD's torques)
+    # (TALOS's effort limits would bound the explicit PD's torques, and its arms' dry friction rows hold
+    # them: the joints' rows off, the instability of the explicit PD alone)
+    s.effort_limits = s.joint_friction = s.joint_limits = s.joint_damping = False
     from stiction import _core
 
     model = _core.SimulatorModel(explicit.scene.model, explicit.scene.halfspaces, explicit.scene.contacts, [], s)

@@ -252,6 +252,9 @@ class SimulatorData:
     def active(self) -> tuple: ...
 
     @property
+    def actuator_torque(self) -> numpy.ndarray: ...
+
+    @property
     def all_converged_step(self) -> bool: ...
 
     @property
@@ -270,15 +273,24 @@ class SimulatorData:
     def drift(self) -> numpy.ndarray: ...
 
     @property
+    def friction_torque(self) -> numpy.ndarray: ...
+
+    @property
     def gaps(self) -> numpy.ndarray: ...
 
     @property
     def iterations_step(self) -> int: ...
 
+    @property
+    def joint_rows(self) -> tuple: ...
+
     kd: numpy.ndarray
     kp: numpy.ndarray
     @property
     def last_dt(self) -> float: ...
+
+    @property
+    def limit_torque(self) -> numpy.ndarray: ...
 
     @property
     def max_residual_step(self) -> float: ...
@@ -365,9 +377,14 @@ class SimulatorSettings:
     activation_distance: float
     delta: float
     dt: float
+    effort_limits: bool
     formulation: str
     formulation_settings: FormulationSettings
     implicit_pd: bool
+    joint_damping: bool
+    joint_friction: bool
+    joint_limit_margin: float
+    joint_limits: bool
     max_iterations: int
     min_dt: float
     mode: IntegrationMode

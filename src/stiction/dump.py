@@ -44,10 +44,6 @@ def step_problem(sim) -> _core.ContactProblem | None:
     timestep = sim.model.settings.mode == _core.IntegrationMode.timestep
     scale = float(d.last_dt) if timestep else 1.0  # step.cpp: solveContacts(sim, sd, h); rk4: 1.0
     A = np.asfortranarray(np.asarray(d.A, dtype=np.float64))
-    extra = A.shape[0] - 3 * len(active)
-    if extra > 0:  # rows that are no contact's: the joints' box rows
-        raise ValueError(f"the step's problem has {extra} row(s) besides its contacts' (box rows: joint friction, "
-                         "effort limits): FCLib has no box blocks")
     b = np.asarray(d.b, dtype=np.float64) * scale
     mus = [_candidate_mu(sim, i) for i in active]
     cons = [_core.Constraint.spatial_friction(m) for m in mus]

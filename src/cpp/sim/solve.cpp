@@ -224,6 +224,20 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   if (sd.out.result.status == SolveStatus::kInfeasible || !sd.out.result.lam.allFinite() ||
       (exact && sd.out.result.status == SolveStatus::kUnresolvable && sd.out.result.precision_floor > kDivergedFloor))
     throw std::runtime_error(unsolvableMessage(sim, sd));
+  // A joint's box row that slips (friction sliding, an actuator saturated) holds its bound exactly, as
+  // the law says (eq. 65: u != 0 only at a bound); the solver leaves it within its tolerance of it (a
+  // saturated actuator read 2.69999888 of 2.7 N m). Its impulse is set on the bound: a projection onto
+  // C that moves lambda by less than the tolerance and makes the recorded torque the limit itself.
+  if (!sd.out.joint_rows.empty() && sd.out.result.states.size() == sd.work->problem->numBlocks()) {
+    const std::size_t first_block = sd.out.active.size() + sim.anchors.size();
+    const auto& cons = sd.work->problem->constraints();
+    const auto& offsets = sd.work->problem->offsets();
+    for (std::size_t blk = first_block; blk < cons.size(); ++blk) {
+      if (cons[blk].kind != ConstraintKind::kBox || sd.out.result.states[blk] != ContactState::kSlip) continue;
+      const Eigen::Index r = offsets[blk];
+      sd.out.result.lam[r] = sd.out.result.u[r] < 0.0 ? cons[blk].upper : cons[blk].lower;
+    }
+  }
   // Per-candidate forces (lambda / scale) and states.
   sd.out.lambda = sd.out.result.lam / scale;
   for (int i = 0; i < sim.numCandidates(); ++i) {
