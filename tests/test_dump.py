@@ -20,9 +20,9 @@ def _solver_problem(sim):
 
 @pytest.mark.parametrize("scene", ["cube-incline-slip", "two-cube-stack", "talos-stand"])
 def test_dump_round_trip_is_the_problem_the_solver_saw(tmp_path, scene):
-    recs = dump.dump(scene, 30, tmp_path, every=10)
+    recs = dump.dump(scene, 30, tmp_path, every=10, **dump.NO_JOINT_ROWS)
     assert [r["step"] for r in recs] == [10, 20, 30]
-    ref = Simulator(scene)
+    ref = Simulator(scene, **dump.NO_JOINT_ROWS)
     for k in range(1, 31):
         ref.step()
         if k % 10:
@@ -136,3 +136,16 @@ def test_every_beyond_the_steps_is_refused(tmp_path, capsys):
     assert cli.main(["dump", "cube-slide", "--steps", "5", "--every", "10", "--out", str(tmp_path)]) == 2
     assert "every = 10 is more than steps = 5" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+def test_dump_refuses_joint_rows(tmp_path):
+    """FCLib has no box rows: a step with joint rows (talos-stand: its arms' dry friction) is refused with
+    one line saying how to dump the contacts alone; --no-joint-rows does."""
+    with pytest.raises(ValueError, match="joint row.*--no-joint-rows"):
+        dump.dump("talos-stand", 1, tmp_path)
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "stiction.cli", "dump", "talos-stand", "--steps", "2", "--out",
+                          str(tmp_path / "d"), "--no-joint-rows"], capture_output=True, text=True)
+    assert out.returncode == 0 and "2 problem(s)" in out.stdout, out.stderr

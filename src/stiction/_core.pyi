@@ -6,11 +6,16 @@ import numpy.typing
 import pinocchio
 
 class Constraint:
-    """One block of rows. Build with Constraint.bilateral(k), Constraint.unilateral(), Constraint.planar_friction(mu), Constraint.spatial_friction(mu). Normal row last."""
+    """One block of rows. Build with Constraint.bilateral(k), Constraint.unilateral(), Constraint.planar_friction(mu), Constraint.spatial_friction(mu), Constraint.box(lower, upper). Normal row last."""
     @staticmethod
     def bilateral(rows: int) -> Constraint: ...
+    @staticmethod
+    def box(lower: float, upper: float) -> Constraint: ...
     @property
     def kind(self) -> ConstraintKind: ...
+
+    @property
+    def lower(self) -> float: ...
 
     @property
     def mu(self) -> float: ...
@@ -24,9 +29,13 @@ class Constraint:
     def spatial_friction(mu: float) -> Constraint: ...
     @staticmethod
     def unilateral() -> Constraint: ...
+    @property
+    def upper(self) -> float: ...
+
 
 class ConstraintKind(int):
     bilateral: ClassVar[ConstraintKind]
+    box: ClassVar[ConstraintKind]
     planar_friction: ClassVar[ConstraintKind]
     spatial_friction: ClassVar[ConstraintKind]
     unilateral: ClassVar[ConstraintKind]

@@ -96,6 +96,9 @@ def _layout(problem: ContactProblem) -> tuple:
             blocks.append(("spatial_friction", 3, float(c.mu)))
         elif c.kind == ConstraintKind.bilateral and c.size in (3, 6):
             blocks.append(("bilateral", int(c.size), 0.0))
+        elif c.kind == ConstraintKind.box:
+            raise ValueError(f"block {i} is a box row (joint friction, effort limits): Pinocchio's solvers "
+                             "take cones and anchors only; use the exact formulation")
         else:
             raise ValueError(
                 f"block {i} ({c.kind.name}, {c.size} rows) has no Pinocchio counterpart; "

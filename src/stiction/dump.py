@@ -21,8 +21,13 @@ from .fclib import write_local
 
 def step_problem(sim) -> _core.ContactProblem | None:
     """The problem the last step's solve saw (None when no contact was active). ValueError when it
-    holds blocks FCLib's local format cannot (planar or frictionless contacts, anchors)."""
+    holds blocks FCLib's local format cannot (planar or frictionless contacts, anchors, box rows)."""
     d = sim.data
+    if d.joint_rows:
+        raise ValueError(f"scene '{sim.scene.name}' at t = {d.t:g}: the step's problem has {len(d.joint_rows)} joint "
+                         "row(s) (position limits, dry friction or effort limits: docs/joint-rows.md), which FCLib "
+                         "local problems (spatial friction contacts only, no box rows) cannot hold; dump the contacts "
+                         "alone with the joint rows off: stiction dump --no-joint-rows")
     active = list(d.active)
     if not active and sim.model.num_anchors == 0:
         return None
@@ -39,6 +44,10 @@ def step_problem(sim) -> _core.ContactProblem | None:
     timestep = sim.model.settings.mode == _core.IntegrationMode.timestep
     scale = float(d.last_dt) if timestep else 1.0  # step.cpp: solveContacts(sim, sd, h); rk4: 1.0
     A = np.asfortranarray(np.asarray(d.A, dtype=np.float64))
+    extra = A.shape[0] - 3 * len(active)
+    if extra > 0:  # rows that are no contact's: the joints' box rows
+        raise ValueError(f"the step's problem has {extra} row(s) besides its contacts' (box rows: joint friction, "
+                         "effort limits): FCLib has no box blocks")
     b = np.asarray(d.b, dtype=np.float64) * scale
     mus = [_candidate_mu(sim, i) for i in active]
     cons = [_core.Constraint.spatial_friction(m) for m in mus]
@@ -115,10 +124,18 @@ def add_arguments(parser) -> None:
     parser.add_argument("--every", type=int, default=1, help="write every K-th step (default 1)")
     parser.add_argument("--solver", choices=_core.solver_names(), help="the simulator's contact solver")
     parser.add_argument("--json", action="store_true", help="print one JSON record per file written")
+    parser.add_argument("--no-joint-rows", action="store_true",
+                        help="simulate with the joints' limits, dry friction, damping and effort limits off "
+                             "(FCLib cannot hold their rows: docs/joint-rows.md)")
+
+
+# The Simulator overrides that turn every joint row (and the damping) off: the contacts alone.
+NO_JOINT_ROWS = {"joint_limits": False, "joint_friction": False, "joint_damping": False, "effort_limits": False}
 
 
 def main(args) -> int:
-    records = dump(args.scene, args.steps, args.out, every=args.every, solver=args.solver)
+    overrides = NO_JOINT_ROWS if args.no_joint_rows else {}
+    records = dump(args.scene, args.steps, args.out, every=args.every, solver=args.solver, **overrides)
     if getattr(args, "json", False):
         print(json.dumps({"files": records}, indent=1))
     else:

@@ -576,12 +576,17 @@ def load(path: str | os.PathLike) -> FclibProblem:
 def write_local(path: str | os.PathLike, problem: ContactProblem, title: str = "", description: str = "",
                 solution: np.ndarray | None = None) -> None:
     """Write a problem made of spatial friction contacts as an FCLib HDF5 local problem
-    (W in CSR storage), so scenes can be dumped and solved by other tools."""
+    (W in CSR storage), so scenes can be dumped and solved by other tools. ValueError for any
+    other block (FCLib has no box blocks: joint friction and effort limits cannot be written)."""
     import h5py
 
     from ._core import ConstraintKind
 
     cons = problem.constraints
+    boxes = [i for i, c in enumerate(cons) if c.kind == ConstraintKind.box]
+    if boxes:
+        raise ValueError(f"FCLib has no box blocks: this problem has {len(boxes)} box row(s) (joint friction, "
+                         f"effort limits; first: block {boxes[0]}), which an FCLib file cannot store")
     if any(c.kind != ConstraintKind.spatial_friction for c in cons):
         raise ValueError("FCLib local problems hold spatial friction contacts only; "
                          "this problem has other constraint kinds")

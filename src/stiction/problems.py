@@ -106,7 +106,8 @@ def two_cube_stack(mass_ratio: float = 1e4, mu: float = 0.5, top_velocity=(0.0, 
 def random_problem(rng: np.random.Generator, kinds: list[str], dofs: int, mu_range=(0.1, 1.0),
                    approaching: float = 0.7) -> ContactProblem:
     """A random problem A = J M⁻¹ Jᵀ with the given block kinds
-    ("spatial", "planar", "unilateral", "bilateral1".."bilateral6").
+    ("spatial", "planar", "unilateral", "bilateral1".."bilateral6", "box": a 1-row interval
+    [-U(0.05, 0.5), U(0.05, 0.5)], as a joint's dry friction).
 
     If the rows outnumber `dofs`, A is rank-deficient, as with redundant contacts.
     b is drawn so that about `approaching` of the contacts are pushed together.
@@ -119,6 +120,8 @@ def random_problem(rng: np.random.Generator, kinds: list[str], dofs: int, mu_ran
             constraints.append(Constraint.planar_friction(float(rng.uniform(*mu_range))))
         elif k == "unilateral":
             constraints.append(Constraint.unilateral())
+        elif k == "box":
+            constraints.append(Constraint.box(-float(rng.uniform(0.05, 0.5)), float(rng.uniform(0.05, 0.5))))
         elif k.startswith("bilateral"):
             constraints.append(Constraint.bilateral(int(k[len("bilateral"):] or 3)))
         else:
@@ -133,7 +136,7 @@ def random_problem(rng: np.random.Generator, kinds: list[str], dofs: int, mu_ran
     b = rng.standard_normal(m) * 0.3
     row = 0
     for c in constraints:
-        if c.kind.name != "bilateral":  # normal row last: positive b pushes the contact closed
+        if c.kind.name not in ("bilateral", "box"):  # normal row last: positive b pushes the contact closed
             n = row + c.size - 1
             b[n] = abs(b[n]) if rng.uniform() < approaching else -abs(b[n])
         row += c.size

@@ -109,7 +109,20 @@ void setB(ContactProblem& p, const bp::object& b) {
   p.setB(toVector(b, "ContactProblem.set_b: b", p.numRows()));
 }
 
-std::string constraintRepr(const Constraint& c) { return "stiction.Constraint." + c.describe(); }
+// Python's own float repr (the shortest that round-trips): eval(repr(c)) == c, box bounds included.
+std::string floatRepr(double x) { return bp::extract<std::string>(bp::object(x).attr("__repr__")()); }
+std::string constraintRepr(const Constraint& c) {
+  switch (c.kind) {
+    case ConstraintKind::kPlanarFriction:
+    case ConstraintKind::kSpatialFriction:
+      return std::string("stiction.Constraint.") + toString(c.kind) + "(mu=" + floatRepr(c.mu) + ")";
+    case ConstraintKind::kBox:
+      return "stiction.Constraint.box(lower=" + floatRepr(c.lower) + ", upper=" + floatRepr(c.upper) + ")";
+    case ConstraintKind::kBilateral:
+    case ConstraintKind::kUnilateral: break;
+  }
+  return "stiction.Constraint." + c.describe();
+}
 bool constraintEq(const Constraint& a, const bp::object& other) {
   bp::extract<const Constraint&> b(other);
   if (!b.check()) return false;

@@ -40,6 +40,7 @@ void projectOntoConstraints(const ContactProblem& problem, Eigen::Ref<Eigen::Vec
       case ConstraintKind::kUnilateral: xi[0] = std::max(0.0, xi[0]); break;
       case ConstraintKind::kPlanarFriction: projectPlanarCone(xi, cons[i].mu); break;
       case ConstraintKind::kSpatialFriction: projectSpatialCone(xi, cons[i].mu); break;
+      case ConstraintKind::kBox: xi[0] = clampToBox(xi[0], cons[i].lower, cons[i].upper); break;
     }
   }
 }

@@ -106,6 +106,14 @@ void measureExactLaw(const ContactProblem& problem, const Eigen::Ref<const Eigen
       primal = std::max(0.0, -l[0]);
       dual = std::max(0.0, -u[0]);
       comp = signorini = std::abs(l[0] * u[0]);
+    } else if (cons[i].kind == ConstraintKind::kBox) {
+      // C = [lo, hi] (lo <= 0 <= hi), w = u (no De Saxce term): box complementarity, u = 0 inside,
+      // u <= 0 at hi, u >= 0 at lo. With u = u+ - u- it is lambda - lo ⟂ u+ and hi - lambda ⟂ u-:
+      // complementarity (lambda - lo) u+ + (hi - lambda) u-, zero exactly when lambda in C obeys it.
+      // No dual part: every u is admissible at some point of the interval.
+      const double lo = cons[i].lower, hi = cons[i].upper;
+      primal = std::max(0.0, std::max(lo - l[0], l[0] - hi));
+      comp = std::abs((l[0] - lo) * std::max(0.0, u[0])) + std::abs((hi - l[0]) * std::max(0.0, -u[0]));
     } else {
       // Friction block (t, n) or (t1, t2, n).
       const int n = k - 1;  // normal row last

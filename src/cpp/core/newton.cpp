@@ -194,6 +194,22 @@ void NewtonSolver::evaluate(const ContactProblem& problem, const Eigen::VectorXd
           store(i, Eigen::Matrix<double, 1, 1>(z > 0.0 ? kap : 0.0), Eigen::Matrix<double, 1, 1>(z > 0.0 ? 0.0 : 1.0));
         break;
       }
+      case ConstraintKind::kBox: {
+        // F = lambda - clamp(z, lo, hi): dF = kappa A's row strictly inside, e_o at (or beyond) a bound
+        const double z = lam[o] - kap * u_[o];
+        const double lo = cons[i].lower, hi = cons[i].upper;
+        const bool inside = z > lo && z < hi;
+        F_[o] = lam[o] - clampToBox(z, lo, hi);
+        if (dense_jacobian) {
+          if (inside)
+            J_.row(o) = kap * A.row(o);
+          else
+            J_(o, o) = 1.0;
+        }
+        if (sparse_jacobian)
+          store(i, Eigen::Matrix<double, 1, 1>(inside ? kap : 0.0), Eigen::Matrix<double, 1, 1>(inside ? 0.0 : 1.0));
+        break;
+      }
       case ConstraintKind::kPlanarFriction: {
         const double ut = u_[o];
         Eigen::Vector2d z = lam.segment<2>(o) - kap * u_.segment<2>(o);

@@ -113,6 +113,7 @@ int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int m
       case ConstraintKind::kPlanarFriction: projectPlanarCone(li, cons[i].mu); break;
       case ConstraintKind::kSpatialFriction: projectSpatialCone(li, cons[i].mu); break;
       case ConstraintKind::kBilateral: break;
+      case ConstraintKind::kBox: li[0] = clampToBox(li[0], cons[i].lower, cons[i].upper); break;
     }
   }
   A.multiply(lam, u_);
@@ -156,6 +157,18 @@ int NsgsSolver::sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int m
           const double old = li[0];
           const double c = ui[0] - Gp[0] * old;
           const double x = Gp[0] > 0.0 ? std::max(0.0, -c / Gp[0]) : (c < 0.0 ? old : 0.0);
+          delta_[0] = x - old;
+          changed = delta_[0] != 0.0;
+          li[0] = x;
+          break;
+        }
+        case ConstraintKind::kBox: {
+          // u = G lambda + c in -N_[lo, hi](lambda): lambda = clamp(-c / G); a row that moves nothing
+          // (G = 0) goes to the bound its fixed velocity c pushes against (c = 0: stays)
+          const double old = li[0];
+          const double c = ui[0] - Gp[0] * old;
+          const double lo = cons[i].lower, hi = cons[i].upper;
+          const double x = Gp[0] > 0.0 ? clampToBox(-c / Gp[0], lo, hi) : (c < 0.0 ? hi : c > 0.0 ? lo : old);
           delta_[0] = x - old;
           changed = delta_[0] != 0.0;
           li[0] = x;

@@ -39,9 +39,12 @@ StageReport proxqpWarmStart(const ContactProblem& problem, const SolverSettings&
     if (c.kind == ConstraintKind::kUnilateral) n_in += 1;
     if (c.kind == ConstraintKind::kPlanarFriction) n_in += 2;
     if (c.kind == ConstraintKind::kSpatialFriction) n_in += facets;
+    if (c.kind == ConstraintKind::kBox) n_in += 1;  // lower <= l <= upper: one row, both bounds
   }
   checkDenseQpSize("ProxQP (proxqp_facets = " + std::to_string(facets) + ")", m, n_in);
   Eigen::MatrixXd C = Eigen::MatrixXd::Zero(n_in, m);
+  Eigen::VectorXd lower = Eigen::VectorXd::Constant(n_in, -1e20);  // (cone rows: C l <= 0)
+  Eigen::VectorXd upper = Eigen::VectorXd::Zero(n_in);
   Eigen::Index row = 0;
   const double shrink = std::cos(M_PI / facets);  // inscribed pyramid
   for (std::size_t i = 0; i < cons.size(); ++i) {
@@ -64,6 +67,11 @@ StageReport proxqpWarmStart(const ContactProblem& problem, const SolverSettings&
           C(row++, o + 2) = -mu * shrink;
         }
         break;
+      case ConstraintKind::kBox:  // the interval itself: the QP's set is exact there
+        lower[row] = cons[i].lower;
+        upper[row] = cons[i].upper;
+        C(row++, o) = 1.0;
+        break;
     }
   }
   const Eigen::MatrixXd& A = problem.delassus().dense();
@@ -72,8 +80,6 @@ StageReport proxqpWarmStart(const ContactProblem& problem, const SolverSettings&
   // A is only positive semi-definite; a tiny shift keeps ProxQP's KKT solves honest.
   H.diagonal().array() += 1e-12 * max_diag;
   const Eigen::VectorXd g = -problem.b();
-  const Eigen::VectorXd lower = Eigen::VectorXd::Constant(n_in, -1e20);
-  const Eigen::VectorXd upper = Eigen::VectorXd::Zero(n_in);
 
   pq::dense::QP<double> qp(m, 0, n_in);
   // Relative tolerances: eps_rel scales with ProxQP's own residual terms; the absolute

@@ -51,6 +51,15 @@ void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen:
       states[i] = ContactState::kClosed;
       continue;
     }
+    if (cons[i].kind == ConstraintKind::kBox) {
+      // As a friction block's boundary: slip when the velocity outweighs what the room left to the
+      // bound it pushes against could cancel (u < 0 holds lambda at upper, u > 0 at lower).
+      const double v = u[o];
+      const double room = v < 0.0 ? cons[i].upper - lam[o] : lam[o] - cons[i].lower;
+      states[i] = std::abs(v) > diag[o] * std::max(0.0, room) && std::abs(v) > speed_floor ? ContactState::kSlip
+                                                                                            : ContactState::kStick;
+      continue;
+    }
     // Compare what the force does (A_nn lambda_n) with the separation velocity u_n.
     const Eigen::Index n = o + k - 1;
     const double a_nn = diag[n];
@@ -139,13 +148,28 @@ std::shared_ptr<const DelassusOperator> scaledOperator(const DelassusOperator& A
   return std::make_shared<DenseDelassus>(A.dense().unaryExpr(scale));
 }
 
+/// The constraints of a problem whose lambda is scaled by 2^e: box rows' bounds scale with lambda
+/// (cones are scale-free). A bound beyond double's range stays the largest double (effectively none).
+std::vector<Constraint> scaledConstraints(const std::vector<Constraint>& constraints, int e) {
+  std::vector<Constraint> out = constraints;
+  if (e == 0) return out;
+  const double big = std::numeric_limits<double>::max();
+  for (Constraint& c : out)
+    if (c.kind == ConstraintKind::kBox) {
+      c.lower = std::max(-big, std::ldexp(c.lower, e));
+      c.upper = std::min(big, std::ldexp(c.upper, e));
+    }
+  return out;
+}
+
 /// The problems a solve works on (docs/solvers.md, "Scale"). Far from 1, the algorithms' absolute
 /// constants and the verdict's squared norms under- or overflow (||b|| = 1e-200 squares to 0: the
 /// relative residual of lambda = 0 read 0). Outside 2^+-kScaleWindow, the driver divides b by 2^c
 /// (c: ||b||'s binary exponent) and A by 2^a (a: its largest diagonal entry's):
 ///   algorithm  (A 2^-a, b 2^-c): lambda' = lambda 2^(a - c), the algorithm's own problem;
 ///   verdict    (A, b 2^-c):      lambda 2^-c, u 2^-c, natural map 2^-c: relative_residual exactly
-///              as for (A, b) (only b and lambda scale, and P_C is positively homogeneous).
+///              as for (A, b) (only b and lambda scale, and P_C is positively homogeneous; box rows'
+///              intervals scale with lambda: P_(sC)(s x) = s P_C(x)).
 /// Powers of two keep every scaling exact (short of leaving double's range).
 struct Frames {
   static constexpr int kScaleWindow = 30;  // 2^30 ~ 1e9: inside, the problem is solved as given
@@ -173,19 +197,19 @@ struct Frames {
       scaleByPowerOfTwo(b, -c);
       verdict_problem = std::make_unique<ContactProblem>(
           std::shared_ptr<const DelassusOperator>(&problem.delassus(), [](const DelassusOperator*) {}), std::move(b),
-          problem.constraints(), std::numeric_limits<double>::infinity(), false);
+          scaledConstraints(problem.constraints(), -c), std::numeric_limits<double>::infinity(), false);
       verdict = verdict_problem.get();
     }
     if (a != 0) {
       Eigen::VectorXd b = problem.b();
       scaleByPowerOfTwo(b, -c);
       algorithm_problem = std::make_unique<ContactProblem>(
-          scaledOperator(problem.delassus(), -a, problem.isSymmetric()), std::move(b), problem.constraints(),
-          std::numeric_limits<double>::infinity(), false);
+          scaledOperator(problem.delassus(), -a, problem.isSymmetric()), std::move(b),
+          scaledConstraints(problem.constraints(), a - c), std::numeric_limits<double>::infinity(), false);
       algorithm = algorithm_problem.get();
       rescaled = true;
     } else if (rescalable && c != 0) {
-      algorithm = verdict;
+      algorithm = verdict;  // (lambda 2^-c: the verdict's bounds are the algorithm's)
       rescaled = true;
     }
   }

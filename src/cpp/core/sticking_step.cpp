@@ -11,7 +11,8 @@
 namespace stiction {
 
 // Every block of x strictly inside its cone: a unilateral row pushing, a friction block's
-// tangential part below mu times a positive normal part (bilateral rows: any value), by a relative
+// tangential part below mu times a positive normal part, a box row inside its interval (bilateral
+// rows: any value), by a relative
 // margin: a block at the edge of slipping (statically indeterminate friction left at mu |lambda_n|
 // by an earlier solve, as in a grid of resting cubes) would most likely leave the cone in the
 // all-stick solution, and the factorization would be wasted. With de_saxce, the normal part is
@@ -38,6 +39,24 @@ bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& x
       case ConstraintKind::kSpatialFriction: {
         const double t = norm2(x[o], x[o + 1]);
         if (!(t < (1.0 - kInsideMargin) * mu * (x[o + 2] - shift * mu * t))) return false;
+        break;
+      }
+      case ConstraintKind::kBox: {
+        // strictly inside the interval, by the margin; de_saxce (x = b, lambda = 0): the natural map's
+        // argument there, b / A_oo (Newton's kappa = 1 / A_oo; a row that moves nothing: b = 0)
+        double v = x[o];
+        if (de_saxce) {
+          double a_oo = 0.0;
+          Eigen::Map<Eigen::MatrixXd> entry(&a_oo, 1, 1);
+          problem.delassus().diagonalBlock(o, 1, entry);
+          if (!(a_oo > 0.0)) {
+            if (x[o] != 0.0) return false;
+          } else {
+            v = x[o] / a_oo;
+          }
+        }
+        const double lo = cons[i].lower, hi = cons[i].upper, margin = kInsideMargin * (hi - lo);
+        if (!(v > lo + margin && v < hi - margin)) return false;
         break;
       }
     }

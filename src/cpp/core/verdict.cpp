@@ -79,6 +79,26 @@ T unilateralRow(T lam, T u, const double* du, T& sq) {
   return delta_z + 2 * eps * (abs(lam) + abs(z));
 }
 
+// A box row (C = [lo, hi], lo <= 0 <= hi): z = lambda - u; r = u strictly inside (no cancellation),
+// lambda - hi above, lambda - lo below (the clamp), each evaluated as written. The bound as for a
+// unilateral row, whose two regions became three: well inside a region (by delta_z) the exact z
+// is in the same one and its closed form holds; near a bound the clamp is 1-Lipschitz, so r moves
+// by at most delta_z, plus the subtractions' own rounding.
+template <typename T>
+T boxRow(T lam, T u, const double* du, T lo, T hi, T& sq) {
+  using std::abs;
+  const T z = lam - u;
+  const T r = z >= hi ? lam - hi : (z <= lo ? lam - lo : u);
+  sq += r * r;
+  if (du == nullptr) return T(0);
+  const T eps = unitRoundoff<T>();
+  const T delta_z = T(*du) + eps * abs(z);
+  if (z - lo > delta_z && hi - z > delta_z) return T(*du);
+  if (z - hi > delta_z) return eps * abs(lam - hi);
+  if (lo - z > delta_z) return eps * abs(lam - lo);
+  return delta_z + T(*du) + 2 * eps * (abs(lam) + abs(z) + std::max(abs(lo), abs(hi)));
+}
+
 // The natural map in scalar type T; with du, also the rounding bound of each block
 // into block_bound (T = double).
 template <typename T>
@@ -101,6 +121,9 @@ T evaluate(const ContactProblem& problem, const T* lam, const T* u, const double
       case ConstraintKind::kUnilateral: err = unilateralRow<T>(lam[o], u[o], dui, sq); break;
       case ConstraintKind::kPlanarFriction: err = frictionBlock<2, T>(lam + o, u + o, dui, mu, sq); break;
       case ConstraintKind::kSpatialFriction: err = frictionBlock<3, T>(lam + o, u + o, dui, mu, sq); break;
+      case ConstraintKind::kBox:
+        err = boxRow<T>(lam[o], u[o], dui, static_cast<T>(cons[i].lower), static_cast<T>(cons[i].upper), sq);
+        break;
     }
     if (block_bound != nullptr) (*block_bound)[i] = static_cast<double>(err);
   }
@@ -108,10 +131,11 @@ T evaluate(const ContactProblem& problem, const T* lam, const T* u, const double
   return sqrt(sq);
 }
 
-// Normal row of a block with one (friction, unilateral), -1 otherwise.
+// Normal row of a block with one (friction, unilateral), -1 otherwise (bilateral, box: a box row's
+// u may take either sign at a solution, and its force is bounded: it certifies nothing).
 Eigen::Index normalRow(const ContactProblem& problem, std::size_t i) {
   const Constraint& c = problem.constraints()[i];
-  if (c.kind == ConstraintKind::kBilateral) return -1;
+  if (c.kind == ConstraintKind::kBilateral || c.kind == ConstraintKind::kBox) return -1;
   return problem.offsets()[i] + c.size - 1;
 }
 
@@ -317,7 +341,7 @@ InfeasibilityCertificate findInfeasibility(const ContactProblem& problem,
       const Eigen::Index o = problem.offsets()[i];
       if (con.kind == ConstraintKind::kBilateral)
         d.segment(o, con.size) = c.segment(o, con.size);
-      else
+      else if (con.kind != ConstraintKind::kBox)  // (box rows: d = 0, their u has no sign)
         d[o + con.size - 1] = std::max(0.0, c[o + con.size - 1]);
     }
     const double scale = d.lpNorm<Eigen::Infinity>();

@@ -10,6 +10,9 @@
 // The artefact (paper §4.5, [7, Fig. 1]): at a sliding contact the complementarity
 // <lambda, u> = 0 with lambda on the cone's boundary forces u_n = mu ||u_t|| > 0: the body
 // separates at mu times its sliding speed, where the exact law keeps u_n = 0.
+//
+// Box rows (joint friction, effort limits: an interval, no De Saxce term) are projected as the
+// interval they are (projectOntoConstraints): on them the CCP is the exact law.
 #include "stiction/admm.hpp"
 #include "stiction/verdict.hpp"
 #include "formulations.hpp"

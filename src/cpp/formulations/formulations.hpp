@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <stdexcept>
 #include <string>
 
 #include "stiction/clock.hpp"
@@ -18,6 +19,16 @@ std::unique_ptr<Formulation> makePyramidFormulation();   // pyramid.cpp
 std::unique_ptr<Formulation> makePenaltyFormulation();   // penalty.cpp
 /// method "admm" or "pgs"; ncp: with De Saxce's correction (Pinocchio's solve_ncp), else its CCP.
 std::unique_ptr<Formulation> makePinocchioFormulation(const std::string& method, bool ncp);  // pinocchio_solvers.cpp
+
+/// Throws std::invalid_argument (one line) when the problem has box rows: for the formulations
+/// that have no law for them (penalty: a spring per contact; Pinocchio's solvers: cones only).
+inline void refuseBoxRows(const ContactProblem& problem, const std::string& formulation) {
+  for (const Constraint& c : problem.constraints())
+    if (c.kind == ConstraintKind::kBox)
+      throw std::invalid_argument("formulation '" + formulation +
+                                  "' does not handle box rows (joint friction, effort limits): use the exact "
+                                  "formulation");
+}
 
 /// The sweep loop of the Gauss-Seidel formulations (nakaoka, penalty): sweep() once, then
 /// residual() (the formulation's own measure), until it is <= settings.tolerance, non-finite, the

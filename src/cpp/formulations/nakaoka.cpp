@@ -14,6 +14,9 @@
 // no longer opposes the sliding velocity and a sliding contact moves along its normal
 // (u_n = A_nt Delta_t != 0): the exact law is violated, which is what the paper points out.
 //
+// Box rows (an interval, one row: no metric question) are clamped: on them the fixed point is
+// box complementarity, the exact law (a problem of box rows alone: projected Gauss-Seidel on its QP).
+//
 // Own stopping test: the fixed point, ||lambda - P^U(lambda - D^+ u)|| <= tol ||lambda||,
 // D the block diagonal of A.
 #include <Eigen/Eigenvalues>
@@ -39,6 +42,7 @@ void projectSingularMetric(const Constraint& c, Eigen::Ref<Eigen::VectorXd> y) {
       y[1] = n;
       return;
     }
+    case ConstraintKind::kBox: y[0] = clampToBox(y[0], c.lower, c.upper); return;  // one row: any metric
     case ConstraintKind::kSpatialFriction: {
       const double n = std::max(0.0, y[2]);
       const double t = norm2(y[0], y[1]);

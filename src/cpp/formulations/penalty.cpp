@@ -71,6 +71,7 @@ class PenaltyFormulation final : public Formulation {
   bool rescalable() const override { return false; }
 
   void iterate(const ContactProblem& problem, const SolverSettings& settings, SolverResult& result) override {
+    refuseBoxRows(problem, name());  // (a spring per contact: no law for an interval of joint forces)
     const auto& cons = problem.constraints();
     const auto& off = problem.offsets();
     const Eigen::Index m = problem.numRows();

@@ -209,6 +209,7 @@ class PinocchioFormulation final : public Formulation {
   std::string equations() const override { return ncp_ ? "73-77 (NCP)" : "78-79 (CCP)"; }
 
   void iterate(const ContactProblem& problem, const SolverSettings& settings, SolverResult& result) override {
+    refuseBoxRows(problem, name());  // (Pinocchio's solvers here take cones and anchors only)
     try {
       run(problem, settings, result);
     } catch (const std::invalid_argument&) {
@@ -301,7 +302,8 @@ class PinocchioFormulation final : public Formulation {
           models.emplace_back(limit);
           break;
         }
-        case ConstraintKind::kPlanarFriction: break;  // refused above
+        case ConstraintKind::kPlanarFriction:
+        case ConstraintKind::kBox: break;  // refused above
       }
       layout.push_back({c.kind, c.size, c.mu});
     }

@@ -20,6 +20,9 @@
 // Lemke's pivoting this is not guaranteed to converge for large mu; when it does not, the
 // result says so (own_converged false).
 //
+// Box rows (an interval: already polyhedral, no De Saxce term) are one QP row with both bounds, and
+// clamped in the ADMM finish: on them the pyramid LCP is the exact law.
+//
 // Own stopping test: the QP solved and ||E (s_P(u) - s)|| <= tol ||b||, i.e. the LCP's
 // complementarity holds up to the tolerance.
 #include <algorithm>
@@ -118,9 +121,12 @@ class PyramidFormulation final : public Formulation {
       if (c.kind == ConstraintKind::kUnilateral) n_in += 1;
       if (c.kind == ConstraintKind::kPlanarFriction) n_in += 3;
       if (c.kind == ConstraintKind::kSpatialFriction) n_in += N + 1;
+      if (c.kind == ConstraintKind::kBox) n_in += 1;
     }
     checkDenseQpSize("pyramid (pyramid_facets = " + std::to_string(N) + ")", m, n_in);
     C_.setZero(n_in, m);
+    lower_.setConstant(n_in, -1e20);  // (cone rows: C l <= 0)
+    upper_.setZero(n_in);
     Eigen::Index row = 0;
     for (std::size_t i = 0; i < cons.size(); ++i) {
       const Eigen::Index o = off[i];
@@ -143,14 +149,17 @@ class PyramidFormulation final : public Formulation {
             C_(row++, o + 2) = -mu * facet_mu;
           }
           break;
+        case ConstraintKind::kBox:
+          lower_[row] = cons[i].lower;
+          upper_[row] = cons[i].upper;
+          C_(row++, o) = 1.0;
+          break;
       }
     }
     const Eigen::MatrixXd& A = problem.delassus().dense();
     H_ = 0.5 * (A + A.transpose());
     const double max_diag = std::max(H_.diagonal().maxCoeff(), 1e-300);
     H_.diagonal().array() += 1e-12 * max_diag;  // A is only semi-definite
-    lower_.setConstant(n_in, -1e20);
-    upper_.setZero(n_in);
     s_.setZero(m);  // E s: the De Saxce shift on the normal rows
     g_ = -problem.b();
     const double scale = stoppingScale(problem);
@@ -283,6 +292,7 @@ class PyramidFormulation final : public Formulation {
           case ConstraintKind::kBilateral: break;
           case ConstraintKind::kUnilateral: xi[0] = std::max(0.0, xi[0]); break;
           case ConstraintKind::kPlanarFriction: projectPlanarCone(xi, cons[i].mu); break;
+          case ConstraintKind::kBox: xi[0] = clampToBox(xi[0], cons[i].lower, cons[i].upper); break;
           case ConstraintKind::kSpatialFriction: {
             if (cons[i].mu <= 0.0) {
               xi[0] = xi[1] = 0.0;

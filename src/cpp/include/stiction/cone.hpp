@@ -1,5 +1,6 @@
 // Euclidean projections onto the blocks' sets C (eq. 58) and the De Saxce
-// correction E s(u) (eq. 76-77). Normal component last in every block.
+// correction E s(u) (eq. 76-77). Normal component last in every block. A box row's C is its
+// interval [lower, upper]: its projection is a clamp (clampToBox).
 #pragma once
 
 #include <algorithm>
@@ -48,5 +49,8 @@ inline void projectPlanarCone(Vec&& x, double mu) {
   x[0] *= s;
   x[1] = n;
 }
+
+/// Projection of x onto a box row's interval [lower, upper] (lower <= 0 <= upper): a clamp.
+inline double clampToBox(double x, double lower, double upper) { return std::min(std::max(x, lower), upper); }
 
 }  // namespace stiction

@@ -7,13 +7,19 @@
 //     w = u + E s(u),   s_i = mu_i ||u_t,i||  added to the normal row (eq. 76-77),
 // the exact law is  C ∋ lambda ⟂ w ∈ C*  (eq. 73-75), C the product of the blocks' sets
 // (bilateral: R^k, unilateral: lambda_n >= 0, friction: ||lambda_t|| <= mu lambda_n, eq. 58)
-// and C* its dual (bilateral: {0}, unilateral: w_n >= 0, friction: mu ||w_t|| <= w_n).
+// and C* its dual (bilateral: {0}, unilateral: w_n >= 0, friction: mu ||w_t|| <= w_n). A box row
+// (C = [lower, upper], not a cone) obeys the variational form of eq. 65, u ∈ -N_C(lambda).
 // Its parts, measured separately (every per-block vector has numBlocks() entries):
 //
 //   natural map      ||lambda - P_C(lambda - w)||  (verdict.hpp's cancellation-free naturalMapNorm)
 //   primal           dist(lambda_i, C_i) = ||lambda_i - P_C(lambda_i)||       (bilateral: 0)
-//   dual             dist(w_i, C_i*) = ||P_C(-w_i)|| (Moreau: C*'s polar is -C)  (bilateral: ||u_i||)
+//   dual             dist(w_i, C_i*) = ||P_C(-w_i)|| (Moreau: C*'s polar is -C)  (bilateral: ||u_i||;
+//                    box: 0)
 //   complementarity  |<lambda_i, w_i>|                        (eq. 75)
+//                    box rows (C = [lo, hi], w = u): |lambda - lo| u+ + |hi - lambda| u-, u = u+ - u-,
+//                    the violation of box complementarity (u = 0 inside, u <= 0 at hi, u >= 0 at lo);
+//                    with primal = 0 it vanishes exactly at the law (every u is admissible somewhere
+//                    on the interval: no dual part)
 //   Signorini        |lambda_n u_n|   (unilateral and friction blocks; eq. 43)
 //   on SLIDING blocks (friction, ||u_t|| > speed floor, lambda_n > 0):
 //     dissipation    ||lambda_t + mu lambda_n u_t / ||u_t||||   (maximum dissipation: the

@@ -2,7 +2,9 @@
 //     min 1/2 l'A l - b'l   s.t.  l in C_F
 // where C_F replaces each spatial cone by its inscribed pyramid with F edges
 // (the LCP-style approximation of paper §4.5; it lacks the De Saxce term, so it
-// is only a starting point for the exact solvers).
+// is only a starting point for the exact solvers). Box rows keep their interval
+// (one QP row with both bounds): on a problem of box, unilateral and bilateral rows
+// alone the QP is the problem itself.
 //
 // Budgets: tolerances are relative (eps_rel = settings.proxqp_tolerance, eps_abs
 // scaled to b and lambda), so a problem with ||b|| = 1e8 costs what it costs at

@@ -15,8 +15,10 @@
 namespace stiction {
 
 /// Every block of x strictly inside its cone, by a relative margin (a unilateral row pushing, a
-/// friction block's tangential part below mu times a positive normal part; bilateral rows: any
-/// value). With de_saxce, the normal part is first shifted by De Saxce's term, x_n - mu |x_t|.
+/// friction block's tangential part below mu times a positive normal part, a box row inside its
+/// interval: it holds, u = 0, like a sticking contact; bilateral rows: any value). With de_saxce
+/// (x = b, lambda = 0), the normal part is first shifted by De Saxce's term, x_n - mu |x_t|, and a
+/// box row is judged at b / A_oo.
 bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& x, bool de_saxce = false);
 
 /// At lambda = 0 the natural map of eq. 65 puts every block in its sticking regime: b inside the

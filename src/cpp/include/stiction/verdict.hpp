@@ -8,7 +8,8 @@
 // (stick) r = w exactly, and where it lies in the polar cone (open) r = lambda;
 // only blocks on the boundary (slip) need the subtraction lambda - P_C(.).
 // Evaluated the usual way, a sticking block with lambda = 1e12 and w = 1e-4
-// gives r = 0: w is below lambda's rounding step.
+// gives r = 0: w is below lambda's rounding step. A box row (C = [lower, upper], no De Saxce
+// term: w = u) is r = u strictly inside, lambda - upper or lambda - lower beyond its bounds.
 //
 // The verdict evaluates it at the returned (double) lambda, in double first; when that
 // is not decisive, in double again from a compensated u (compensated.hpp: off by
@@ -39,7 +40,8 @@
 //
 // Infeasibility. Every solution has u_n >= 0 on normal rows and u = 0 on
 // bilateral rows (w in C* <=> u_n >= 0 for a friction block). So for d >= 0 on
-// normal rows (any sign on bilateral rows, 0 on tangential rows),
+// normal rows (any sign on bilateral rows, 0 on tangential and box rows, whose u may
+// take either sign at a solution),
 // d'(A lambda - b) >= 0, hence ||A^T d|| ||lambda|| >= b'd: no solution has
 // ||lambda|| < b'd / ||A^T d||. A normal row with A_nn = 0 (a contact on something
 // that cannot move) and b_n > 0 gives d = e_n and no solution at all. The
