@@ -160,16 +160,24 @@ def test_errors_name_what_is_wrong():
         mujoco_twins.contact_geometry(scene, np.zeros((2, 7)))
 
 
-def test_bench_script_runs_and_reports_every_scene_asked(capsys):
-    """The robot benchmark on two scenes, 1.2 s each: past ur5-push-wall's settle_time of 1 s, which the
-    summary behind its accuracy columns requires."""
+def _bench_module():
     spec = importlib.util.spec_from_file_location("bench_robots_mujoco", ROOT / "benchmarks" / "bench_robots_mujoco.py")
     bench = importlib.util.module_from_spec(spec)
     sys.modules["bench_robots_mujoco"] = bench
     spec.loader.exec_module(bench)
-    res = bench.run(["ur5-push-wall", "solo12-stand"], repeats=1, duration=1.2, impratios=(1.0,))
+    return bench
+
+
+def test_bench_script_runs_and_reports_every_scene_asked(capsys):
+    """The robot benchmark on two scenes, 1.2 s each: past ur5-push-wall's settle_time of 1 s, which the
+    summary behind its accuracy columns requires; and with the joint rows on, ur5-push-wall (the UR5's
+    six joints given 0.5 N m of dry friction) and solo12-stand-joint-rows as bundled."""
+    bench = _bench_module()
+    res = bench.run(["ur5-push-wall", "solo12-stand"], repeats=1, duration=1.2, impratios=(1.0,),
+                    joint_rows=["ur5-push-wall", "solo12-stand-joint-rows"])
     assert [r["scene"] for r in res["rows"]] == ["ur5-push-wall", "solo12-stand"]
-    for row in res["rows"]:
+    assert [r["scene"] for r in res["joint_rows"]] == ["ur5-push-wall", "solo12-stand-joint-rows"]
+    for row in res["rows"] + res["joint_rows"]:
         for key in ("stiction rollout", "mujoco 1 rollout", "stiction rollout cpu", "mujoco 1 rollout cpu",
                     "stiction steps", "mujoco 1 steps"):
             assert row["us"][key]["median"] > 0
@@ -181,23 +189,65 @@ def test_bench_script_runs_and_reports_every_scene_asked(capsys):
         assert acc["stiction"]["converged"]
         assert acc["stiction"]["penetration"] < 1e-6 < acc["mujoco impratio 1"]["penetration"]
         assert acc["mujoco impratio 1"]["rollout_vs_steps"] == 0.0
-    assert "| ur5-push-wall | 6 | 1 |" in bench.markdown(res)
+    ur5, solo = res["joint_rows"]
+    assert ur5["friction_added"] == 0.5 and solo["friction_added"] == 0.0
+    assert ur5["rows_in_play"] == {"limits": 6, "friction": 6, "damping": 0, "effort": 6}
+    assert solo["rows_in_play"] == {"limits": 12, "friction": 12, "damping": 0, "effort": 12}
+    for row in res["joint_rows"]:  # warm-up and one repetition, each a rollout and a step-by-step run
+        assert row["stiction_steps_run"] == 2 * 2 * row["steps"] and row["stiction_steps_unconverged"] == 0
+    text = bench.markdown(res)
+    assert "| ur5-push-wall | 6 | 1 |" in text
+    assert "## Joint rows on" in text and "| ur5-push-wall | 6 / 6 / 0 / 6 | 0.5 |" in text
+    assert f"yes ({2 * 2 * solo['steps']} steps) |" in text
+
+
+def test_bench_joint_rows_scenes_add_friction_where_the_urdf_has_none():
+    """The joint-rows set's scenes: every actuated joint without URDF friction gets the robot's tau_c
+    (TALOS's legs 1.0 N m; its upper body keeps its URDF's 1.0), nothing else changes; a scene of
+    locked joints or one already holding its rows is as bundled."""
+    bench = _bench_module()
+    talos, added = bench.joint_rows_scene("talos-stand")
+    bundled = load_scene("talos-stand")
+    assert added == 1.0
+    for j in range(1, talos.model.njoints):
+        name, iv = talos.model.names[j], talos.model.joints[j].idx_v
+        nv = talos.model.joints[j].nv
+        friction = talos.model.friction[iv:iv + nv]
+        if name.startswith("leg_"):
+            assert (friction == 1.0).all() and bundled.model.friction[iv] == 0.0
+        elif name == "root_joint":
+            assert not friction.any()
+        else:
+            assert (friction == bundled.model.friction[iv:iv + nv]).all() and friction[0] == 1.0
+    np.testing.assert_array_equal(talos.model.effortLimit, bundled.model.effortLimit)
+    np.testing.assert_array_equal(talos.model.damping, bundled.model.damping)
+    box, added = bench.joint_rows_scene("ur5-push-box")
+    assert added == 0.5 and list(box.model.friction) == [0.5] * 6 + [0.0] * 6  # the crate's free joint: none
+    for name in ("solo12-slope-stick", "solo12-stand-joint-rows"):
+        scene, added = bench.joint_rows_scene(name)
+        assert added == 0.0
+        np.testing.assert_array_equal(scene.model.friction, load_scene(name).model.friction)
 
 
 @pytest.mark.parametrize("name", SCENES)
 def test_same_joint_pd_torque(twins, name, rng):
     """MuJoCo's actuator torque at a random state is stiction's PD law kp (q_target - q) - kd v +
-    tau_ff joint by joint (the UR5's gravity feed-forward included)."""
+    tau_ff joint by joint (the UR5's gravity feed-forward included), clamped to the URDF's effort
+    limit (the scenes' effort_limits are on)."""
     scene, twin = twins[name]
     model, m = scene.model, twin.model
     d = mujoco.MjData(m)
     q, v = _random_configuration(model, rng), rng.standard_normal(model.nv)
     d.qpos[:], d.qvel[:], d.ctrl[:] = twin.qpos(q), twin.qvel(q, v), twin.ctrl
     mujoco.mj_forward(m, d)
-    expected = scene.kp * pin.difference(model, q, scene.q_target) - scene.kd * v + scene.tau_ff
+    law = scene.kp * pin.difference(model, q, scene.q_target) - scene.kd * v + scene.tau_ff
+    effort = np.asarray(model.effortLimit, dtype=float)
+    expected = np.clip(law, -effort, effort)
     for j in twin.joints:
         if j.kind != "free":
             assert d.qfrc_actuator[j.dofadr] == pytest.approx(expected[j.idx_v], rel=1e-12, abs=1e-12)
         else:
             assert not d.qfrc_actuator[j.dofadr:j.dofadr + 6].any()
     assert np.abs(expected).max() > 1.0
+    if name in ("go2-stand", "talos-stand"):  # stiff PD far from its target: some actuator saturates
+        assert (np.abs(law) > effort).any()

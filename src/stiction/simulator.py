@@ -132,6 +132,20 @@ _JOINT_SWITCHES = {"joint_limits": "limits", "joint_friction": "friction", "join
                    "effort_limits": "effort_limits"}
 RIGID_BODY_PASSES = ("fused", "pinocchio")
 
+
+def joint_switches(scene: Scene, overrides: dict) -> dict[str, bool]:
+    """Which joint rows a run of `scene` has (joint_limits, joint_friction, joint_damping, effort_limits):
+    each override given, else the scene's [joints] switch, else on. Shared by the Simulator and the
+    MuJoCo twin (stiction.bench.mujoco_twins), so both apply the same ones."""
+    joints_cfg = (scene.config or {}).get("joints") or {}
+    out = {}
+    for setting, key in _JOINT_SWITCHES.items():
+        value = overrides.get(setting, joints_cfg.get(key, True))
+        if not isinstance(value, (bool, np.bool_)):
+            raise ValueError(f"{setting} must be True or False, got {value!r}")
+        out[setting] = bool(value)
+    return out
+
 _MODES = {"timestep": 0, "rk4": 1, "ode": 1, "adaptive": 2}
 MAX_RECORD_BYTES = 4e9  # a trajectory larger than this is refused before simulating
 MAX_STEPS = 1e9  # steps in one rollout (a C++ int counts them; a typo'd dt must not hang or overflow)
@@ -247,13 +261,9 @@ class Simulator:
         if not isinstance(passes, str) or passes not in RIGID_BODY_PASSES:
             raise ValueError(f"rigid_body_passes must be one of {', '.join(RIGID_BODY_PASSES)}, got {passes!r}")
         s.rigid_body_passes = passes
-        joints_cfg = (sc.config or {}).get("joints") or {}
-        for setting, key in _JOINT_SWITCHES.items():
-            value = overrides.get(setting, joints_cfg.get(key, True))
-            if not isinstance(value, (bool, np.bool_)):
-                raise ValueError(f"{setting} must be True or False, got {value!r}")
-            setattr(s, setting, bool(value))
-        s.joint_limit_margin = float(joints_cfg.get("limit_margin", 0.02))
+        for setting, value in joint_switches(sc, overrides).items():
+            setattr(s, setting, value)
+        s.joint_limit_margin = float(((sc.config or {}).get("joints") or {}).get("limit_margin", 0.02))
         return s
 
     @property

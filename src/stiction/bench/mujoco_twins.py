@@ -8,7 +8,9 @@ time step; MuJoCo's own soft contact model otherwise (default ``solref``/``solim
 - **the scene's own contacts** (:func:`mujoco_twin`, the robot benchmark
   ``benchmarks/bench_robots_mujoco.py``): bodies, joints and inertias from the scene's
   ``pinocchio.Model``, each stiction contact a sphere with an explicit ``<pair>`` against its
-  half-space, the joint PD as affine actuators, and maps between the two state vectors; it builds
+  half-space, the joint PD as affine actuators, the joints' limits, dry friction, damping and
+  actuator effort limits as the stiction Simulator applies them (same switches: the scene's
+  ``[joints]`` table and the Simulator's overrides), and maps between the two state vectors; it builds
   any scene made of free-flyer, revolute and prismatic joints whose contacts are spheres or points
   on half-spaces (section "Twins from the scene's model" below);
 - **MuJoCo's own geometry** (the sweeps: ``stiction bench work-precision`` and ``scaling``, and
@@ -249,7 +251,23 @@ def _solo12_q0() -> np.ndarray:
 # damping and friction, joint limits) that stiction does not make. One MuJoCo body per Pinocchio
 # joint, at ``jointPlacements[j]`` in its parent's frame, with ``inertias[j]`` as an explicit full
 # inertia; free flyer → ``freejoint``, revolute/prismatic (aligned or not, bounded or not) →
-# ``hinge`` / ``slide`` (no limits, damping, armature or frictionloss: stiction has none).
+# ``hinge`` / ``slide`` (no armature, no spring).
+#
+# Joint rows (stiction's docs/joint-rows.md, issue 24): the twin carries what the stiction Simulator
+# applies, from the same model values and with the same switches (``joint_switches``: the keyword
+# overrides, else the scene's ``[joints]`` table, else on), each left at MuJoCo's own soft model
+# (default ``solref``/``solimp``):
+# - ``joint_limits``: a 1-dof joint (nq = nv = 1) with a finite limit gets ``range`` =
+#   (model.lowerPositionLimit, upperPositionLimit) and ``limited`` (one infinite side stays infinite;
+#   stiction's ``limit_margin`` is when its row enters the problem, not a change of the law, so
+#   MuJoCo's joint ``margin`` stays 0);
+# - ``joint_friction``: ``frictionloss`` = model.friction (MuJoCo's dry friction rows);
+# - ``joint_damping``: ``damping`` = model.damping (implicit under ``implicitfast``, as in stiction);
+# - ``effort_limits``: the joint's PD actuator gets ``forcerange`` = ±model.effortLimit and
+#   ``forcelimited`` (0, inf and max-double: none) — a clamp of feed-forward + PD, as stiction's box row.
+# With a switch off, or a model without the values, the joint is as before (unlimited, no damping,
+# no frictionloss, actuator unlimited). A free joint takes friction or damping only when its six
+# values are equal (MuJoCo has one value per joint).
 #
 # Contacts (eq. 65 in stiction, soft in MuJoCo): each stiction contact — a sphere or a point on a
 # frame against a half-space — becomes a sphere geom on the body of the frame's joint, and each
@@ -376,14 +394,54 @@ def _quat_z_to(normal: np.ndarray) -> list[float]:
     return [float(x) for x in quat]
 
 
-def mujoco_twin(scene, impratio: float = 1.0, point_radius: float = POINT_RADIUS) -> MujocoTwin:
+def _joint_dynamics(joint, model: pin.Model, j: int, switches: dict) -> None:
+    """MuJoCo's frictionloss and (linear) damping of Pinocchio joint j, as the switches say (0 when off)."""
+    nv, iv = model.joints[j].nv, model.joints[j].idx_v
+    values = {}
+    for setting, array, what in (("joint_friction", model.friction, "friction"),
+                                 ("joint_damping", model.damping, "damping")):
+        v = np.asarray(array[iv:iv + nv], dtype=float) if switches[setting] else np.zeros(nv)
+        if not (np.isfinite(v).all() and (v >= 0).all()):
+            raise ValueError(f"joint {model.names[j]!r}: {what} must be finite and >= 0, got {v.tolist()}")
+        if (v != v[0]).any():
+            raise ValueError(f"joint {model.names[j]!r}: {what} {v.tolist()} differs between its coordinates; "
+                             "a MuJoCo joint has one value")
+        values[what] = float(v[0])
+    joint.frictionloss = values["friction"]
+    joint.damping = [values["damping"], 0.0, 0.0]  # (MuJoCo 4: linear, then polynomial terms)
+
+
+def _position_limits(model: pin.Model, j: int) -> tuple[float, float] | None:
+    """(lower, upper) of a 1-dof joint with a finite limit (model.lower/upperPositionLimit), else None."""
+    joint = model.joints[j]
+    if joint.nq != 1 or joint.nv != 1:
+        return None
+    lower, upper = float(model.lowerPositionLimit[joint.idx_q]), float(model.upperPositionLimit[joint.idx_q])
+    if not (np.isfinite(lower) or np.isfinite(upper)):
+        return None
+    if not lower < upper:
+        raise ValueError(f"joint {model.names[j]!r}: position limits [{lower:g}, {upper:g}]; MuJoCo needs lower < "
+                         "upper")
+    return lower, upper
+
+
+def mujoco_twin(scene, impratio: float = 1.0, point_radius: float = POINT_RADIUS, *,
+                joint_limits: bool | None = None, joint_friction: bool | None = None,
+                joint_damping: bool | None = None, effort_limits: bool | None = None) -> MujocoTwin:
     """The MuJoCo model of a stiction Scene (every choice: the comment above; the options:
-    :func:`accurate_options`).
+    :func:`accurate_options`). `joint_limits`, `joint_friction`, `joint_damping`, `effort_limits`:
+    as the Simulator's overrides of those names (None: the scene's ``[joints]`` switch, else on).
 
     Raises ValueError for what has no MuJoCo counterpart here: a joint type other than free
     flyer, revolute or prismatic, a joint PD on a multi-dof joint, coal collision pairs or anchors,
-    a mode other than time stepping."""
+    a mode other than time stepping, a joint limit with lower = upper (MuJoCo needs lower < upper),
+    unequal friction or damping over a free joint's six coordinates."""
+    from ..simulator import joint_switches  # noqa: PLC0415
+
     mj = _mujoco()
+    given = {"joint_limits": joint_limits, "joint_friction": joint_friction, "joint_damping": joint_damping,
+             "effort_limits": effort_limits}
+    switches = joint_switches(scene, {k: v for k, v in given.items() if v is not None})
     if not np.isfinite(impratio) or impratio < 1.0:
         raise ValueError(f"impratio must be a finite number >= 1, got {impratio!r}")
     if not point_radius > 0.0:
@@ -400,6 +458,7 @@ def mujoco_twin(scene, impratio: float = 1.0, point_radius: float = POINT_RADIUS
     spec.modelname = scene.name
     spec.compiler.inertiafromgeom = mj.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
     spec.compiler.autolimits = False
+    spec.compiler.degree = False  # hinge ranges in radians, as Pinocchio's
 
     # bodies and joints, one per Pinocchio joint (parents come first in Pinocchio's order)
     bodies = {0: spec.worldbody}
@@ -419,7 +478,7 @@ def mujoco_twin(scene, impratio: float = 1.0, point_radius: float = POINT_RADIUS
         if shortname == "JointModelFreeFlyer":
             if model.parents[j] != 0:
                 raise ValueError(f"joint {name!r}: a free flyer below another joint")
-            body.add_freejoint(name=name)
+            _joint_dynamics(body.add_freejoint(name=name), model, j, switches)
             kinds[j], roots[j] = "free", placement
             body.pos, body.quat = [0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]  # qpos carries the placement
             bodies[j] = body
@@ -437,9 +496,12 @@ def mujoco_twin(scene, impratio: float = 1.0, point_radius: float = POINT_RADIUS
             raise ValueError(f"joint {name!r}: {shortname} has no MuJoCo twin here (free flyer, revolute and "
                              "prismatic joints only)")
         joint = body.add_joint(name=name, type=jtype, axis=[float(a) for a in axis])
+        joint.stiffness, joint.armature = np.zeros(3), 0.0
+        _joint_dynamics(joint, model, j, switches)
         joint.limited = mj.mjtLimited.mjLIMITED_FALSE
-        joint.damping, joint.stiffness = np.zeros(3), np.zeros(3)
-        joint.armature, joint.frictionloss = 0.0, 0.0
+        limits = _position_limits(model, j) if switches["joint_limits"] else None
+        if limits is not None:
+            joint.limited, joint.range = mj.mjtLimited.mjLIMITED_TRUE, list(limits)
         bodies[j] = body
 
     # half-spaces: planes in the world, thin boxes on moving bodies
@@ -508,6 +570,9 @@ def mujoco_twin(scene, impratio: float = 1.0, point_radius: float = POINT_RADIUS
         act.biasprm[:3] = [ff[0], -kp[0], -kd[0]]
         act.ctrllimited = mj.mjtLimited.mjLIMITED_FALSE
         act.forcelimited = mj.mjtLimited.mjLIMITED_FALSE
+        effort = float(model.effortLimit[jm.idx_v])
+        if switches["effort_limits"] and 0.0 < effort < np.finfo(float).max:  # (0, inf, max-double: none)
+            act.forcelimited, act.forcerange = mj.mjtLimited.mjLIMITED_TRUE, [-effort, effort]
         q_t = scene.q_target[jm.idx_q:jm.idx_q + jm.nq]
         ctrl.append(float(np.arctan2(q_t[1], q_t[0]) if kinds[j] == "hinge-unbounded" else q_t[0]))
 
