@@ -27,7 +27,7 @@ STEPS = 300
 STRICT = 1e-9  # relative, while the contact modes agree
 LOOSE = 1e-6   # relative, the whole run (after a mode switch: the scene's own sensitivity to rounding)
 # the last step compared strictly where a contact mode switch comes first (see the module's docstring)
-STRICT_UNTIL = {"ur5-push-box": 84, "pile-24": 230, "solo12-effort-limit": 179}
+STRICT_UNTIL = {"ur5-push-box": 84, "pile-24": 230}
 
 
 def relative_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
