@@ -81,8 +81,22 @@ bool planChains(const SimulatorModel& sim, const SimulatorData& sd, const pinocc
                                   a.frame2 != 0 ? deepestCoordinate(sim, sim.model.frames[a.frame2].parentJoint) : -1);
     if (!add(3, end)) return false;
   }
-  for (const JointRow& r : sd.out.joint_rows)  // J = +-e_dof: the chain of the coordinate itself
-    if (!add(1, sim.dof_local[static_cast<std::size_t>(r.dof)])) return false;
+  // Joint rows (J = +-e_dof) in blocks of up to 3 consecutive rows whose coordinates lie on one root
+  // path (a leg's HAA, HFE, KFE friction rows): one chain, the deepest coordinate's, for the three,
+  // and a third of the blocks to pair (Solo-12's 12 friction rows: 4 blocks, not 12)
+  const std::vector<JointRow>& joint_rows = sd.out.joint_rows;
+  for (std::size_t i = 0; i < joint_rows.size();) {
+    int deepest = sim.dof_local[static_cast<std::size_t>(joint_rows[i].dof)];
+    int k = 1;
+    while (k < 3 && i + static_cast<std::size_t>(k) < joint_rows.size()) {
+      const int next = sim.dof_local[static_cast<std::size_t>(joint_rows[i + static_cast<std::size_t>(k)].dof)];
+      if (next <= deepest || blockChainEnd(data, next, deepest) != next) break;  // not below it on one path
+      deepest = next;
+      ++k;
+    }
+    if (!add(k, deepest)) return false;
+    i += static_cast<std::size_t>(k);
+  }
   const std::size_t blocks = plan.blocks.size();
   plan.prefix.resize(blocks * blocks);
   for (std::size_t f = 0; f < blocks; ++f)
