@@ -23,7 +23,7 @@ pinocchio::JointIndex jointOfDof(const pinocchio::Model& model, int dof) {
   return 0;
 }
 
-// Where a forced limit row sits in SimulatorWorkspace::forced_limit (bits per joint limit).
+// A limit's sides in SimulatorWorkspace::forced_limit and limit_rows (bits per joint limit).
 constexpr char kForcedLower = 1, kForcedUpper = 2;
 
 }  // namespace
@@ -41,10 +41,16 @@ void selectJointRows(const SimulatorModel& sim, SimulatorData& sd, const Eigen::
   for (std::size_t i = 0; i < sim.joint_limits.size(); ++i) {
     const JointLimit& l = sim.joint_limits[i];
     const double qj = q[l.idx_q], vj = v[l.idx_v];
-    if (std::isfinite(l.lower) && ((qj - l.lower) - h * std::max(0.0, -vj) < margin || (w.forced_limit[i] & kForcedLower)))
+    char has = 0;  // (the limit rows this problem has, for finishJointRows's check)
+    if (std::isfinite(l.lower) && ((qj - l.lower) - h * std::max(0.0, -vj) < margin || (w.forced_limit[i] & kForcedLower))) {
       rows.push_back({JointRowKind::kLowerLimit, l.idx_v, static_cast<int>(i), qj - l.lower});
-    if (std::isfinite(l.upper) && ((l.upper - qj) - h * std::max(0.0, vj) < margin || (w.forced_limit[i] & kForcedUpper)))
+      has |= kForcedLower;
+    }
+    if (std::isfinite(l.upper) && ((l.upper - qj) - h * std::max(0.0, vj) < margin || (w.forced_limit[i] & kForcedUpper))) {
       rows.push_back({JointRowKind::kUpperLimit, l.idx_v, static_cast<int>(i), l.upper - qj});
+      has |= kForcedUpper;
+    }
+    w.limit_rows[i] = has;
   }
   // Actuators: with the implicit PD, a row for those near saturation (the torque the PD would give at
   // v+ = v, or the last step's); the others' torque is checked after the step (finishJointRows).
@@ -164,14 +170,11 @@ bool finishJointRows(const SimulatorModel& sim, SimulatorData& sd, const Eigen::
   for (std::size_t i = 0; i < sim.joint_limits.size(); ++i) {
     const JointLimit& l = sim.joint_limits[i];
     const double qj = sd.q[l.idx_q];
-    bool has_lower = false, has_upper = false;
-    for (const JointRow& r : out.joint_rows)
-      if (r.limit == static_cast<int>(i)) (r.kind == JointRowKind::kLowerLimit ? has_lower : has_upper) = true;
-    if (!has_lower && qj < l.lower) {
+    if (!(w.limit_rows[i] & kForcedLower) && qj < l.lower) {
       w.forced_limit[i] |= kForcedLower;
       complete = false;
     }
-    if (!has_upper && qj > l.upper) {
+    if (!(w.limit_rows[i] & kForcedUpper) && qj > l.upper) {
       w.forced_limit[i] |= kForcedUpper;
       complete = false;
     }

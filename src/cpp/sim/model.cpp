@@ -356,6 +356,7 @@ SimulatorWorkspace::SimulatorWorkspace(const SimulatorModel& sim)
   effort_row.assign(static_cast<std::size_t>(nv), 0);
   forced_effort.assign(static_cast<std::size_t>(nv), 0);
   forced_limit.assign(sim.joint_limits.size(), 0);
+  limit_rows.assign(sim.joint_limits.size(), 0);
   effort_c = Eigen::VectorXd::Zero(nv);
   effort_k = Eigen::VectorXd::Zero(nv);
 }

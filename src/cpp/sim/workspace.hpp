@@ -156,6 +156,7 @@ struct SimulatorWorkspace {
   // compliance 1 / (h K)); rows forced into the step after a pass without them saturated an actuator
   // or crossed a limit, and the state such a pass restarts from.
   std::vector<char> effort_row, forced_effort, forced_limit;
+  std::vector<char> limit_rows;  ///< per joint limit: the sides with a row in the current problem
   Eigen::VectorXd effort_c, effort_k;
   Eigen::VectorXd step_q0, step_v0;
   Eigen::VectorXd control_torque;  ///< the control torque at the step's start (computeControl, clamped)
