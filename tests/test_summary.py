@@ -27,7 +27,8 @@ KEYS = {"scene", "mode", "formulation", "dt", "duration", "steps", "recorded_ste
         "first_unconverged_t", "settle_time", "base_drift", "max_normal_velocity_while_sliding",
         "mean_acceleration_along_slope", "expected_sliding_acceleration", "max_foot_slip", "max_foot_displacement",
         "rows_per_contact", "contact_rows", "warnings",
-        "final_base_speed", "final_base_sway", "settled"}  # the last three: tests/test_standing.py
+        "final_base_speed", "final_base_sway", "settled",  # these three: tests/test_standing.py
+        "max_limit_overshoot", "max_joint_drift", "max_effort_ratio", "saturated_steps"}  # and the joints' below
 CLOSED_GAP = 1e-4  # [m] the summary's "stays closed" (its docstring: gaps <= 1e-4 m after settling)
 
 
@@ -400,3 +401,32 @@ def test_rows_per_contact_is_the_most_over_the_run():
     assert (gaps[-1] > 0.02).all()  # up in the air at the end
     assert s["rows_per_contact"] == [3 if x else 0 for x in (gaps <= 1e-9).any(axis=0)] == [3, 0] * 4
     assert s["contact_rows"] == 12
+
+
+# ------------------------------------------------------------------ the joints' keys (docs/joint-rows.md)
+
+def test_joint_keys_from_the_trajectory_and_the_model():
+    """max_limit_overshoot, max_joint_drift, max_effort_ratio and saturated_steps recomputed from the
+    trajectory and the Pinocchio model's limits: with the joints' rows on (the limit holds: overshoot ~0)
+    and off (the elbow passes its limit, and nothing enforced it: 0 reported, the limit being off)."""
+    for joint_limits in (True, False):
+        sim = Simulator("ur5-joint-limit", joint_limits=joint_limits, duration=2.5)
+        traj = sim.rollout()
+        s = sim.summary(traj)
+        model = sim.scene.model
+        lower, upper = model.lowerPositionLimit, model.upperPositionLimit
+        over = max(0.0, float(np.max(traj.q - upper)), float(np.max(lower - traj.q)))
+        assert s["max_limit_overshoot"] == (over if joint_limits else 0.0)
+        if not joint_limits:
+            assert over > 0.05  # (it did pass the limit)
+        after = int(np.argmax(traj.t >= sim.scene.settle_time - 1e-12))
+        assert s["max_joint_drift"] == float(np.abs(traj.q[after:] - traj.q[after]).max())
+        effort = model.effortLimit
+        ratio = np.abs(traj.tau[1:]) / effort
+        assert s["max_effort_ratio"] == pytest.approx(float(ratio.max()), rel=1e-15)
+        assert s["saturated_steps"] == int((ratio >= 1.0).any(axis=1).sum())
+    sim = Simulator("solo12-effort-limit")
+    traj = sim.rollout()
+    s = sim.summary(traj)
+    tau = np.abs(traj.tau[1:, 6:])
+    assert s["max_effort_ratio"] == 1.0 and s["saturated_steps"] == int((tau >= 2.7).any(axis=1).sum()) > 10
