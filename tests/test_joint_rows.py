@@ -269,6 +269,19 @@ def test_bad_model_values_are_errors_naming_the_joint():
         Simulator(sc)
 
 
+def test_formulations_without_box_rows_refuse_at_construction():
+    """penalty and Pinocchio's solvers have no law for box rows: a model with dry joint friction is
+    refused when the Simulator is built (one line), unless the friction is switched off; CCP, Nakaoka
+    and the pyramid take the box as it is and hold the pendulum as the exact law does."""
+    for name in ("penalty", "pinocchio-admm"):
+        with pytest.raises(ValueError, match=f"formulation '{name}' does not handle box rows.*joint_friction"):
+            Simulator("pendulum-friction-hold", formulation=name)
+    Simulator("pendulum-friction-hold", formulation="penalty", joint_friction=False).rollout(0.01)
+    for name in ("ccp", "nakaoka", "pyramid"):
+        traj = Simulator("pendulum-friction-hold", formulation=name, duration=0.5).rollout()
+        assert np.abs(traj.q[:, 0] - traj.q[0, 0]).max() <= 1e-12, name
+
+
 def test_cli_runs_the_joint_scenes():
     for name in ("pendulum-friction-hold", "ur5-joint-limit"):
         out = subprocess.run([sys.executable, "-m", "stiction.cli", "simulate", name, "--duration", "2.5", "--json"],

@@ -27,7 +27,7 @@ inline void refuseBoxRows(const ContactProblem& problem, const std::string& form
     if (c.kind == ConstraintKind::kBox)
       throw std::invalid_argument("formulation '" + formulation +
                                   "' does not handle box rows (joint friction, effort limits): use the exact "
-                                  "formulation");
+                                  "formulation, or switch them off (joint_friction = false, effort_limits = false)");
 }
 
 /// The sweep loop of the Gauss-Seidel formulations (nakaoka, penalty): sweep() once, then

@@ -297,6 +297,13 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
   }
   num_candidates = static_cast<int>(slot_pair.size());
   deriveJointRows(model, settings, joint_limits, joint_friction, effort_limit, joint_damping, friction_dofs, effort_dofs);
+  // Box rows have no law in the penalty formulation (a spring per contact) or in Pinocchio's solvers
+  // (cones only; formulations.hpp, refuseBoxRows). Dry friction has its rows at every step: said here.
+  // (An actuator's effort row appears only near saturation: the formulation refuses that step.)
+  if (!friction_dofs.empty() && (settings.formulation == "penalty" || settings.formulation.rfind("pinocchio-", 0) == 0))
+    throw std::invalid_argument("formulation '" + settings.formulation + "' does not handle box rows, and the model '" +
+                                model.name + "' has dry joint friction: use the exact formulation, or switch it off "
+                                "(joint_friction = false)");
   dof_part.assign(static_cast<std::size_t>(model.nv), -1);
   dof_local.assign(static_cast<std::size_t>(model.nv), -1);
   for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
