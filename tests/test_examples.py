@@ -46,6 +46,26 @@ def test_solve_contact_problem(tmp_path):
     assert "converged True" in out
 
 
+def test_joint_rows(tmp_path):
+    """The example's pendulum (1 kg point mass 0.5 m below a hinge about y, 1e-6 kg m^2 of its own) against
+    closed forms: gravity's torque -m g L sin(theta), I = m L^2 + 1e-6."""
+    import math
+
+    out = run(Path(EXAMPLES[0].parent / "joint_rows.py"), tmp_path)
+    lines = {line.split(":")[0]: numbers(line) for line in out.splitlines()}
+    m, g, length, tau_c = 1.0, 9.81, 0.5, 0.5
+    moved, friction, gravity = next(v for k, v in lines.items() if k.startswith("hold"))[1:]
+    assert moved == 0.0 and friction == pytest.approx(0.9 * tau_c, abs=1e-6) and gravity == -friction
+    theta = math.asin(1.1 * tau_c / (m * g * length))
+    expected = (-m * g * length * math.sin(theta) + tau_c) / (m * length ** 2 + 1e-6)
+    got = next(v for k, v in lines.items() if k.startswith("slip"))[1]
+    assert got == pytest.approx(expected, rel=1e-8)
+    smallest, overshoot, limit, gravity = next(v for k, v in lines.items() if k.startswith("limit"))[1:]
+    assert abs(smallest - 0.2) <= 1e-12 and overshoot <= 1e-12
+    assert limit == pytest.approx(m * g * length * math.sin(0.2), rel=1e-6) and gravity == pytest.approx(-limit, rel=1e-6)
+    assert next(v for k, v in lines.items() if k.startswith("effort"))[-1] == 2.0
+
+
 def test_every_example_has_a_test():
-    tested = {"custom_model.py", "solve_contact_problem.py"}
+    tested = {"custom_model.py", "solve_contact_problem.py", "joint_rows.py"}
     assert {p.name for p in EXAMPLES} == tested
