@@ -97,6 +97,17 @@ def test_a_fast_joint_far_from_its_limit_gets_its_row_in_time():
     assert np.abs(traj.q[-1, 2] - 1.8) <= 1e-9 or traj.q[-1, 2] < 1.8
 
 
+def test_ode_modes_relax_the_limit_rows():
+    """rk4 (the relaxed DAI, eq. 64, delta = 1 ms): the limit row is relaxed like a contact's, the elbow
+    goes past 1.8 rad by less than a millimetre-radian on impact and comes back to the limit."""
+    sim = Simulator("ur5-joint-limit", mode="rk4", dt=1e-4, delta=1e-3, duration=1.0)
+    traj = sim.rollout()
+    q = traj.q[:, 2]
+    assert 0.0 < q.max() - 1.8 <= 1e-3
+    assert abs(q[-1] - 1.8) <= 1e-6
+    assert traj.converged[1:].all()
+
+
 # ---- dry friction
 
 def test_pendulum_below_its_friction_torque_holds_without_creep():
