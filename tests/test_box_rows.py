@@ -130,24 +130,16 @@ def test_a_box_row_that_moves_nothing_goes_to_the_bound_its_velocity_pushes():
 # ------------------------------------------------------------------ box QPs: every exact solver
 
 @pytest.mark.parametrize("solver, warm", EXACT)
-@pytest.mark.parametrize("m", [2, 3, 4, 5, 6])
-def test_box_qp_matches_enumeration_of_active_sets(solver, warm, m):
-    rng = np.random.default_rng(1000 + m)
-    for _ in range(4):
+@pytest.mark.parametrize("m, reference, draws", [(m, "enumeration", 4) for m in (2, 3, 4, 5, 6)] +
+                         [(m, "lbfgsb", 3) for m in (8, 10, 12)])
+def test_box_qp_matches_an_independent_qp_solution(solver, warm, m, reference, draws):
+    """Box-only problems are the box QP: against the enumeration of every active set (m <= 6) or
+    scipy's L-BFGS-B polished on its active set (m = 8..12)."""
+    rng = np.random.default_rng((1000 if reference == "enumeration" else 2000) + m)
+    qp = qp_by_enumeration if reference == "enumeration" else qp_by_lbfgsb
+    for _ in range(draws):
         p, A, b, lo, hi = box_qp_problem(rng, m)
-        expected = qp_by_enumeration(A, b, lo, hi)
-        r = solve(p, solver, warm)
-        assert r.converged, r.message
-        np.testing.assert_allclose(r.lam, expected, rtol=0, atol=1e-8 * np.linalg.norm(expected))
-
-
-@pytest.mark.parametrize("solver, warm", EXACT)
-@pytest.mark.parametrize("m", [8, 10, 12])
-def test_box_qp_matches_lbfgsb(solver, warm, m):
-    rng = np.random.default_rng(2000 + m)
-    for _ in range(3):
-        p, A, b, lo, hi = box_qp_problem(rng, m)
-        expected = qp_by_lbfgsb(A, b, lo, hi)
+        expected = qp(A, b, lo, hi)
         r = solve(p, solver, warm)
         assert r.converged, r.message
         np.testing.assert_allclose(r.lam, expected, rtol=0, atol=1e-8 * np.linalg.norm(expected))
