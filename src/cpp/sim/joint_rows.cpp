@@ -108,14 +108,29 @@ Constraint jointRowConstraint(const SimulatorModel& sim, const SimulatorData& sd
   return Constraint::box(-bound, bound);
 }
 
+namespace {
+
+// A joint on its limit with dry friction can hold a pair of torques that cancel (the limit pushing, the
+// friction pulling back: their rows are +-e_dof, one null direction of A): the part of the last step's
+// limit and friction torques that cancels, which the warm start leaves out (a gripper resting on its
+// limit under its own PD read 0.54 N m of limit torque against 0.54 of friction, from step to step).
+double cancellingTorque(const SimulatorOutputs& out, int dof) {
+  const double limit = out.limit_torque[dof], friction = out.friction_torque[dof];
+  if (limit * friction >= 0.0) return 0.0;
+  return std::copysign(std::min(std::abs(limit), std::abs(friction)), limit);
+}
+
+}  // namespace
+
 double jointRowGuess(const SimulatorModel& sim, const SimulatorData& sd, std::size_t k, double scale) {
   const JointRow& r = sd.out.joint_rows[k];
+  const double squeeze = cancellingTorque(sd.out, r.dof);  // (limit side; the friction's is -squeeze)
   switch (r.kind) {
-    case JointRowKind::kLowerLimit: return scale * std::max(0.0, sd.out.limit_torque[r.dof]);
-    case JointRowKind::kUpperLimit: return scale * std::max(0.0, -sd.out.limit_torque[r.dof]);
+    case JointRowKind::kLowerLimit: return scale * std::max(0.0, sd.out.limit_torque[r.dof] - squeeze);
+    case JointRowKind::kUpperLimit: return scale * std::max(0.0, -(sd.out.limit_torque[r.dof] - squeeze));
     case JointRowKind::kFriction: {
       const double bound = sim.joint_friction[r.dof];
-      return scale * std::clamp(sd.out.friction_torque[r.dof], -bound, bound);
+      return scale * std::clamp(sd.out.friction_torque[r.dof] + squeeze, -bound, bound);
     }
     case JointRowKind::kEffort: break;
   }
