@@ -16,6 +16,10 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
+// The filtered Newton step (box rows) is taken when the part of F it leaves is below this share of
+// the stopping test's threshold.
+constexpr double kFilteredShare = 0.5;
+
 // Jacobian of the projection onto {||x_t|| <= mu x_n} (k = 2 or 3, normal last).
 template <int K>
 Eigen::Matrix<double, K, K> coneProjectionJacobian(const Eigen::Matrix<double, K, 1>& z, double mu) {
@@ -394,6 +398,17 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
     const double tr = diagonal_.segment(off[i], cons[i].size).sum();
     kappa_[i] = tr > 0.0 ? cons[i].size / tr : 1.0;
   }
+  // With box rows (a robot's joint friction, effort limits) the step is filtered to J's numerical
+  // range. A robot standing with every joint's friction row has more rows than velocities (ANYmal:
+  // 12 contact + 12 joint rows, rank <= 18): at every all-stick iterate dF = K A is singular, and
+  // the part of F no lambda can cancel (b's rounding out of A's range, ~3e-3 of the tolerance
+  // there) became a step r_0 / eps along A's null space, as large as lambda itself with
+  // eps ~ ||F||: it left the boxes and the line search found no descent (measured on anymal-stand
+  // with 0.5 N m friction: over half the steps stalled and fell back to ProxQP). The filtered step
+  // moves sigma r_0 / eps^2 there, and one Newton step then converges as on a full-rank A.
+  // Contact-only problems keep the plain step (their measured paths, FCLib; the sticking step
+  // covers their usual rank-deficient case, a sole's or a tower's all-stick solution).
+  const bool filter_null_space = !uncoupled_ && problem.hasBoxRows();
   message = "iteration limit reached";
   int step = 0;
   constexpr int kHistory = 4;
@@ -401,7 +416,8 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   evaluate(problem, lam, false);  // the Jacobian only once a step is needed
   double f_norm = F_.norm();
   for (; step < max_steps; ++step) {
-    const StoppingTest::Outcome outcome = test.check(lam, u_, naturalMapNorm(problem, lam, u_));
+    const double natural_map = naturalMapNorm(problem, lam, u_);
+    const StoppingTest::Outcome outcome = test.check(lam, u_, natural_map);
     if (outcome != StoppingTest::kContinue) {
       message = outcome == StoppingTest::kConverged ? "converged" : kUnresolvableMessage;
       break;
@@ -439,6 +455,28 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
     if (!step_.allFinite()) {
       message = "singular Newton system";
       break;
+    }
+    if (filter_null_space) {
+      // d = (J + eps I)^-1 J d0 = d0 - eps (J + eps I)^-1 d0: one more solve with the factor in hand
+      // (iterated Tikhonov). Along a direction J nearly annihilates (sigma << eps) the step d0 is
+      // -F_sigma / eps and d only sigma F_sigma / eps^2; elsewhere the two agree to O(eps / sigma).
+      // By the linear model d0 leaves F + J d0 = -eps d0 and d leaves F + J d = -eps (d0 + d): the
+      // part of F along those directions, which no step near this active set cancels. d is taken
+      // when that part is below half the tolerance (in the natural map's units: F is K u where
+      // every block sticks): rounding the answer need not cancel. Above it the part is real (a
+      // UR5 pushing on a wall, whose gap term asks the joints for a slip of 1e-9 at 50 times the
+      // tolerance): a box row has to reach its bound, and the plain step's long move along those
+      // directions is what finds it.
+      filtered_ = eps * step_;
+      if (sparse_) {
+        filtered_ = sparse_lu_.solve(filtered_);
+      } else if (m <= SmallDenseLU::kMaxRows) {
+        small_lu_.solve(filtered_);
+      } else {
+        filtered_ = lu_.solve(filtered_);
+      }
+      const double left = eps * (2.0 * step_ - filtered_).norm();
+      if (filtered_.allFinite() && left * natural_map <= kFilteredShare * test.threshold() * f_norm) step_ -= filtered_;
     }
     // Non-monotone backtracking on ||F|| (against the worst of the last few
     // values): the natural map is only semismooth, a strict decrease test

@@ -19,47 +19,94 @@ namespace stiction {
 // first shifted by De Saxce's term, x_n - mu |x_t| (see stickingAtZero).
 constexpr double kInsideMargin = 1e-6;
 
+namespace {
+
+// A_oo (one entry of A's diagonal).
+double diagonalEntry(const ContactProblem& problem, Eigen::Index o) {
+  double a_oo = 0.0;
+  Eigen::Map<Eigen::MatrixXd> entry(&a_oo, 1, 1);
+  problem.delassus().diagonalBlock(o, 1, entry);
+  return a_oo;
+}
+
+// Block i of x strictly inside its cone (strictlyInsideCones, one block).
+bool blockStrictlyInside(const ContactProblem& problem, std::size_t i, const Eigen::VectorXd& x, bool de_saxce) {
+  const Constraint& c = problem.constraints()[i];
+  const Eigen::Index o = problem.offsets()[i];
+  const double mu = c.mu;
+  const double shift = de_saxce ? 1.0 : 0.0;
+  switch (c.kind) {
+    case ConstraintKind::kBilateral: return true;
+    case ConstraintKind::kUnilateral: return x[o] > 0.0;
+    case ConstraintKind::kPlanarFriction: {
+      const double t = std::abs(x[o]);
+      return t < (1.0 - kInsideMargin) * mu * (x[o + 1] - shift * mu * t);
+    }
+    case ConstraintKind::kSpatialFriction: {
+      const double t = norm2(x[o], x[o + 1]);
+      return t < (1.0 - kInsideMargin) * mu * (x[o + 2] - shift * mu * t);
+    }
+    case ConstraintKind::kBox: {
+      // strictly inside the interval, by the margin; de_saxce (x = b, lambda = 0): the natural map's
+      // argument there, b / A_oo (Newton's kappa = 1 / A_oo; a row that moves nothing: b = 0)
+      double v = x[o];
+      if (de_saxce) {
+        const double a_oo = diagonalEntry(problem, o);
+        if (!(a_oo > 0.0)) {
+          if (x[o] != 0.0) return false;
+        } else {
+          v = x[o] / a_oo;
+        }
+      }
+      const double margin = kInsideMargin * (c.upper - c.lower);
+      return v > c.lower + margin && v < c.upper - margin;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
 bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& x, bool de_saxce) {
+  for (std::size_t i = 0; i < problem.numBlocks(); ++i)
+    if (!blockStrictlyInside(problem, i, x, de_saxce)) return false;
+  return true;
+}
+
+bool restingOnBounds(const ContactProblem& problem, const Eigen::VectorXd& lam) {
+  if (!problem.hasBoxRows()) return false;
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
-  const double shift = de_saxce ? 1.0 : 0.0;
+  // A box row within the margin of a bound: -1 lower, +1 upper; 0 strictly inside (or not a box row)
+  auto side = [&](std::size_t i) -> int {
+    const Constraint& c = cons[i];
+    if (c.kind != ConstraintKind::kBox) return 0;
+    const double v = lam[off[i]], margin = kInsideMargin * (c.upper - c.lower);
+    if (v > c.lower + margin && v < c.upper - margin) return 0;
+    return std::abs(v - c.lower) <= margin ? -1 : std::abs(v - c.upper) <= margin ? 1 : 2;
+  };
+  bool on_bound = false;
   for (std::size_t i = 0; i < cons.size(); ++i) {
+    if (blockStrictlyInside(problem, i, lam, false)) continue;
+    const int s = side(i);
+    if (s != -1 && s != 1) return false;
+    on_bound = true;
+  }
+  if (!on_bound) return false;
+  // Each row on a bound: the natural map's argument z = lambda - u / A_oo at the guess
+  // (u = A lambda - b) within the margin of the interval: u does not push it off its bound.
+  thread_local Eigen::VectorXd u;
+  u.resize(problem.numRows());
+  problem.delassus().multiply(lam, u);
+  u -= problem.b();
+  for (std::size_t i = 0; i < cons.size(); ++i) {
+    const int s = side(i);
+    if (s == 0) continue;
     const Eigen::Index o = off[i];
-    const double mu = cons[i].mu;
-    switch (cons[i].kind) {
-      case ConstraintKind::kBilateral: break;
-      case ConstraintKind::kUnilateral:
-        if (!(x[o] > 0.0)) return false;
-        break;
-      case ConstraintKind::kPlanarFriction: {
-        const double t = std::abs(x[o]);
-        if (!(t < (1.0 - kInsideMargin) * mu * (x[o + 1] - shift * mu * t))) return false;
-        break;
-      }
-      case ConstraintKind::kSpatialFriction: {
-        const double t = norm2(x[o], x[o + 1]);
-        if (!(t < (1.0 - kInsideMargin) * mu * (x[o + 2] - shift * mu * t))) return false;
-        break;
-      }
-      case ConstraintKind::kBox: {
-        // strictly inside the interval, by the margin; de_saxce (x = b, lambda = 0): the natural map's
-        // argument there, b / A_oo (Newton's kappa = 1 / A_oo; a row that moves nothing: b = 0)
-        double v = x[o];
-        if (de_saxce) {
-          double a_oo = 0.0;
-          Eigen::Map<Eigen::MatrixXd> entry(&a_oo, 1, 1);
-          problem.delassus().diagonalBlock(o, 1, entry);
-          if (!(a_oo > 0.0)) {
-            if (x[o] != 0.0) return false;
-          } else {
-            v = x[o] / a_oo;
-          }
-        }
-        const double lo = cons[i].lower, hi = cons[i].upper, margin = kInsideMargin * (hi - lo);
-        if (!(v > lo + margin && v < hi - margin)) return false;
-        break;
-      }
-    }
+    const double a_oo = diagonalEntry(problem, o);
+    if (!(a_oo > 0.0)) return false;  // (a row that moves nothing: its u = -b whatever lambda)
+    const double push = (s > 0 ? -u[o] : u[o]) / a_oo;  // how far past the bound z lies
+    if (!(push <= kInsideMargin * (cons[i].upper - cons[i].lower))) return false;
   }
   return true;
 }
@@ -76,7 +123,8 @@ bool stickingAtZero(const ContactProblem& problem) {
 }
 
 bool stickingGuess(const ContactProblem& problem, const Eigen::VectorXd& lam) {
-  return strictlyInsideCones(problem, lam) || (lam.isZero(0.0) && stickingAtZero(problem));
+  return strictlyInsideCones(problem, lam) || (lam.isZero(0.0) && stickingAtZero(problem)) ||
+         restingOnBounds(problem, lam);
 }
 
 bool StickingStep::factorShifted(const ContactProblem& problem, double shift) {

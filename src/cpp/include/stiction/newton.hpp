@@ -38,6 +38,7 @@ class NewtonSolver final : public ContactSolver {
   void solveUncoupled(const ContactProblem& problem, double eps);
 
   Eigen::VectorXd kappa_, diagonal_, u_, F_, trial_, step_;
+  Eigen::VectorXd filtered_;  // eps (dF + eps I)^-1 d0, the part of the step d0 the filter removes
   Eigen::MatrixXd J_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
   SmallDenseLU small_lu_;

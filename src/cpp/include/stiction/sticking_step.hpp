@@ -25,9 +25,21 @@ bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& x
 /// cones once shifted by De Saxce's term (sticking_step.cpp).
 bool stickingAtZero(const ContactProblem& problem);
 
+/// Every block of lam strictly inside its cone but some box rows (a joint's dry friction, effort
+/// limit) within the margin of a bound that rest there: at lam the natural map's argument
+/// z = lam_o - u_o / A_oo (u = A lam - b) lies within the margin of the interval, the sticking
+/// regime. A joint held by exactly its friction limit (a standing robot's joints once they slipped
+/// to rest; ProxQP's solution, a vertex of the box) rests; a slipping joint, whose velocity puts z
+/// past its bound, does not (anymal-stand: z inside at rest, 1e3-1e7 margins past while slipping).
+/// A unilateral row at 0 (a joint limit touched with no force) is left out: there the joint may sit
+/// a rounding inside its limit, which no all-stick force makes up (TALOS's grippers, 2e-14 rad,
+/// twice the tolerance). False without box rows (no product then).
+bool restingOnBounds(const ContactProblem& problem, const Eigen::VectorXd& lam);
+
 /// The guess `lam` predicts the all-stick solution: strictly inside every cone (a warm start where
 /// every contact was closed and sticking: a robot standing, a box at rest, a tower), or zero with
-/// every block sticking there (a cold problem at rest: CubesH8).
+/// every block sticking there (a cold problem at rest: CubesH8), or inside but for box rows resting on
+/// their bounds (restingOnBounds).
 bool stickingGuess(const ContactProblem& problem, const Eigen::VectorXd& lam);
 
 /// The all-stick solution near lam: from x = lam, steps d = R^-1 A R^-1 (b - A x) with
