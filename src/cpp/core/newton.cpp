@@ -398,14 +398,13 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
     const double tr = diagonal_.segment(off[i], cons[i].size).sum();
     kappa_[i] = tr > 0.0 ? cons[i].size / tr : 1.0;
   }
-  // With box rows (a robot's joint friction, effort limits) the step is filtered to J's numerical
-  // range. A robot standing with every joint's friction row has more rows than velocities (ANYmal:
-  // 12 contact + 12 joint rows, rank <= 18): at every all-stick iterate dF = K A is singular, and
-  // the part of F no lambda can cancel (b's rounding out of A's range, ~3e-3 of the tolerance
-  // there) became a step r_0 / eps along A's null space, as large as lambda itself with
-  // eps ~ ||F||: it left the boxes and the line search found no descent (measured on anymal-stand
-  // with 0.5 N m friction: over half the steps stalled and fell back to ProxQP). The filtered step
-  // moves sigma r_0 / eps^2 there, and one Newton step then converges as on a full-rank A.
+  // With box rows (a robot's joint friction, effort limits) the step may be filtered to J's
+  // numerical range (below). A robot standing with every joint's friction row has more rows than
+  // velocities (ANYmal: 12 contact + 12 joint rows, rank <= 18): at every all-stick iterate
+  // dF = K A is singular, and the part of F no lambda can cancel (b's rounding out of A's range,
+  // ~3 % of the tolerance there) became a plain step r_0 / eps along A's null space, as large as
+  // lambda itself with eps ~ ||F||: it left the boxes and the line search found no descent
+  // (anymal-stand with 0.5 N m friction: over half the steps stalled and fell back to ProxQP).
   // Contact-only problems keep the plain step (their measured paths, FCLib; the sticking step
   // covers their usual rank-deficient case, a sole's or a tower's all-stick solution).
   const bool filter_null_space = !uncoupled_ && problem.hasBoxRows();

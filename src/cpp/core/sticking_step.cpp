@@ -73,8 +73,19 @@ bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& x
   return true;
 }
 
+namespace {
+
+// Rows can be held open (pinned) in the dense factor: a dense A of up to kDenseFactorRows rows,
+// with box rows (contact-only problems keep their all-stick test).
+bool canPin(const ContactProblem& problem) {
+  return problem.hasBoxRows() && problem.delassus().sparse() == nullptr && problem.numRows() <= kDenseFactorRows;
+}
+
+}  // namespace
+
 bool restingOnBounds(const ContactProblem& problem, const Eigen::VectorXd& lam) {
   if (!problem.hasBoxRows()) return false;
+  const bool pin = canPin(problem);
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
   // A box row within the margin of a bound: -1 lower, +1 upper; 0 strictly inside (or not a box row)
@@ -88,6 +99,10 @@ bool restingOnBounds(const ContactProblem& problem, const Eigen::VectorXd& lam) 
   bool on_bound = false;
   for (std::size_t i = 0; i < cons.size(); ++i) {
     if (blockStrictlyInside(problem, i, lam, false)) continue;
+    if (pin && cons[i].kind == ConstraintKind::kUnilateral && lam[off[i]] == 0.0) {
+      on_bound = true;  // (held open by the sticking step when u >= 0 there, else closed by it)
+      continue;
+    }
     const int s = side(i);
     if (s != -1 && s != 1) return false;
     on_bound = true;
@@ -154,6 +169,7 @@ bool StickingStep::factorShifted(const ContactProblem& problem, double shift) {
     stick_from_dense_ = S != nullptr;
   }
   stick_sparse_path_ = S != nullptr;
+  if (stick_sparse_path_ && !stick_pinned_.empty()) return false;  // (canPin: not reached)
   if (stick_sparse_path_) {
     // The ordering (AMD) and symbolic factor are kept while A's pattern stays (the same contacts
     // from step to step).
@@ -191,6 +207,9 @@ bool StickingStep::factorShifted(const ContactProblem& problem, double shift) {
   }
   stick_shifted_ = problem.delassus().dense();
   stick_shifted_.diagonal().array() += shift;
+  // a pinned row's large shift holds it out of the system: R^-1 is (R_SS)^-1 on the others, to
+  // O(1 / kPinShift), and ~0 on it
+  for (Eigen::Index o : stick_pinned_) stick_shifted_(o, o) += kPinShift / kStickShift * shift;
   stick_llt_.compute(stick_shifted_);
   return stick_llt_.info() == Eigen::Success;
 }
@@ -214,6 +233,15 @@ bool StickingStep::run(const ContactProblem& problem, Eigen::VectorXd& lam, doub
   A.diagonal(stick_diagonal_);
   const double scale = stick_diagonal_.cwiseAbs().maxCoeff();
   if (!(scale > 0.0) || !std::isfinite(scale)) return false;
+  // Unilateral rows the guess holds open (lambda = 0, u >= 0) stay so: pinned at 0 (restingOnBounds)
+  stick_pinned_.clear();
+  if (canPin(problem)) {
+    const auto& cons = problem.constraints();
+    const auto& off = problem.offsets();
+    for (std::size_t i = 0; i < cons.size(); ++i)
+      if (cons[i].kind == ConstraintKind::kUnilateral && stick_x_[off[i]] == 0.0 && stick_u_[off[i]] >= 0.0)
+        stick_pinned_.push_back(off[i]);
+  }
   // Refinement solves with the factor in hand: 1 converged, 0 unresolvable, -1 stalled (the
   // natural map not halved by a solve) or out of solves. first_map: the natural map after the first.
   double natural_map = initial_map, first_map = -1.0;
@@ -228,6 +256,7 @@ bool StickingStep::run(const ContactProblem& problem, Eigen::VectorXd& lam, doub
       refinementDirection(stick_u_, stick_d_);
       ++solves;
       stick_x_ -= stick_d_;
+      for (Eigen::Index o : stick_factor_pinned_) stick_x_[o] = 0.0;  // (it moved by ~u_o / pin shift)
       A.multiplyWithAbs(stick_x_, stick_u_, stick_abs_);
       stick_u_ -= problem.b();
       natural_map = naturalMapNorm(problem, stick_x_, stick_u_);
@@ -282,6 +311,8 @@ bool StickingStep::run(const ContactProblem& problem, Eigen::VectorXd& lam, doub
   }
   stick_factor_rows_ = problem.numRows();
   stick_factor_shift_ = kStickShift * scale;
+  stick_factor_pinned_ = stick_pinned_;
+  stick_factor_pin_shift_ = kPinShift * scale;
   stick_step_state_ = StepMatrix::kNone;  // (a fresh factor's own step: the solves)
   stick_factor_diagonal_ = stick_diagonal_;
   if (refine() == 1) {
@@ -299,6 +330,7 @@ void StickingStep::refinementDirection(const Eigen::VectorXd& r, Eigen::VectorXd
   // (A R^-1 r = r - rho R^-1 r: the filter costs a second solve, not a product)
   solveShifted(r, d);
   stick_w_ = r - stick_factor_shift_ * d;
+  for (Eigen::Index o : stick_factor_pinned_) stick_w_[o] -= stick_factor_pin_shift_ * d[o];  // (A = R - rho I - M P)
   solveShifted(stick_w_, d);
 }
 
@@ -306,6 +338,7 @@ void StickingStep::prepareStepMatrix() {
   stick_step_state_ = StepMatrix::kRefused;
   const Eigen::Index m = stick_factor_rows_;
   if (stick_sparse_path_ || m <= 0 || m > kStickSmallRows || stick_shifted_.rows() != m) return;
+  if (!stick_factor_pinned_.empty()) return;  // (its pivots' spread refuses it anyway)
   // Explicit inverses are as accurate as the solves only while R is well conditioned; near a
   // rank-deficient A (a sole's four corners: R^-1 ~ 1 / rho along A's null space) R^-1 - rho R^-2
   // would cancel to nothing. The pivots bound cond(R) from below (free: TALOS's soles, 1e11, stop
@@ -357,6 +390,7 @@ void StickingStep::solveShifted(const Eigen::VectorXd& rhs, Eigen::VectorXd& x) 
 bool StickingStep::heldFactorFits(const ContactProblem& problem) const {
   const Eigen::Index m = problem.numRows();
   if (stick_factor_rows_ != m || stick_factor_diagonal_.size() != m || stick_diagonal_.size() != m) return false;
+  if (stick_pinned_ != stick_factor_pinned_) return false;
   // the same rows (a cheap fingerprint: A's diagonal, stick_diagonal_, within kStaleDiagonalChange of
   // the factored one's)
   const double scale = stick_factor_diagonal_.cwiseAbs().maxCoeff();
