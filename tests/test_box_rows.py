@@ -318,6 +318,47 @@ def test_a_real_misfit_along_the_null_space_still_makes_joints_slip(seed):
     assert any(s == ContactState.slip for s in r.states[4:])
 
 
+def pressing_arm_problem(seed, misfit):
+    """A fixed-base arm (6 joints, dry friction on each) pressing a tool on a wall: 1 spatial contact
+    and 6 box rows, A of rank 6 in 9 rows. b has a part out of A's range `misfit` times the
+    tolerance (the contact's gap term, which no motion with every joint stuck fits): no all-stick
+    answer; some joints must slip, barely. The guess is an all-stick point (the previous step's)."""
+    rng = np.random.default_rng(seed)
+    nv, mu, tau, tol = 6, 0.5, 5e-4, 1e-10
+    M = spd(rng, nv, cond=20.0)
+    J = np.vstack([rng.standard_normal((3, nv)), np.eye(nv)])
+    A = J @ np.linalg.solve(M, J.T)
+    A = 0.5 * (A + A.T)
+    normal, angle = rng.uniform(0.05, 0.2), rng.uniform(0.0, 2.0 * np.pi)
+    lam = np.concatenate([[0.15 * normal * np.cos(angle), 0.15 * normal * np.sin(angle), normal],
+                          rng.uniform(-0.9, 0.9, nv) * tau])
+    U, _, _ = np.linalg.svd(A)
+    b = A @ lam
+    null = U[:, nv:] @ rng.standard_normal(3)
+    b = b + misfit * tol * np.linalg.norm(b) * null / np.linalg.norm(null)
+    cons = [Constraint.spatial_friction(mu)] + [Constraint.box(-tau, tau)] * nv
+    return ContactProblem(np.asfortranarray(A), b, cons), lam, tol
+
+
+@pytest.mark.parametrize("seed", range(10))
+@pytest.mark.parametrize("misfit", [5.0, 50.0])
+def test_newton_finds_the_joints_that_slip_barely(seed, misfit):
+    # Along A's null space u does not change: a joint can only take up the misfit by reaching its
+    # bound, and descent lies only just past the point where its row's z = lambda - kappa u crosses
+    # it (a window the line search's halvings missed: every one of these stalled, as a UR5 pressing
+    # on a wall did). The line search also tries those crossings.
+    p, guess, tol = pressing_arm_problem(seed, misfit)
+    r = solve(p, "newton", guess, tol=tol)
+    assert r.converged and r.iterations <= 30, (r.message, r.iterations)
+    b = np.asarray(p.b)
+    assert natural_map(p, r.lam) <= 2.0 * tol * np.linalg.norm(b)
+    assert check_box_complementarity(p, r.lam, tol) == 6
+    u = np.asarray(p.A) @ r.lam - b
+    slipping = [o for c, o in zip(p.constraints, p.offsets) if c.kind == stiction.ConstraintKind.box
+                and abs(u[o]) > 2.0 * tol * np.linalg.norm(b)]
+    assert slipping and all(abs(abs(r.lam[o]) - 5e-4) <= 2.0 * tol * np.linalg.norm(b) for o in slipping)
+
+
 # ------------------------------------------------------------------ mixed with friction cones
 
 def check_box_complementarity(p, lam, tol):

@@ -75,8 +75,8 @@ bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& x
 
 namespace {
 
-// Rows can be held open (pinned) in the dense factor: a dense A of up to kDenseFactorRows rows,
-// with box rows (contact-only problems keep their all-stick test).
+// Rows can be held on a bound (pinned) in the dense factor: a dense A of up to kDenseFactorRows
+// rows, with box rows (contact-only problems keep their all-stick test).
 bool canPin(const ContactProblem& problem) {
   return problem.hasBoxRows() && problem.delassus().sparse() == nullptr && problem.numRows() <= kDenseFactorRows;
 }
@@ -233,14 +233,33 @@ bool StickingStep::run(const ContactProblem& problem, Eigen::VectorXd& lam, doub
   A.diagonal(stick_diagonal_);
   const double scale = stick_diagonal_.cwiseAbs().maxCoeff();
   if (!(scale > 0.0) || !std::isfinite(scale)) return false;
-  // Unilateral rows the guess holds open (lambda = 0, u >= 0) stay so: pinned at 0 (restingOnBounds)
+  // Rows that rest on a bound with u not pushing them off it are pinned there (restingOnBounds):
+  // unilateral rows the guess holds open (lambda = 0, u >= 0) stay open, and a box row on a bound
+  // that u presses against stays on it exactly. (Left free, the all-stick answer puts such a box
+  // row a rounding past its bound, within the tolerance; the simulator's next guess clamps it back,
+  // and every step then took a refinement: go2-stand with 0.5 N m friction.)
   stick_pinned_.clear();
+  stick_pinned_value_.clear();
   if (canPin(problem)) {
     const auto& cons = problem.constraints();
     const auto& off = problem.offsets();
-    for (std::size_t i = 0; i < cons.size(); ++i)
-      if (cons[i].kind == ConstraintKind::kUnilateral && stick_x_[off[i]] == 0.0 && stick_u_[off[i]] >= 0.0)
-        stick_pinned_.push_back(off[i]);
+    for (std::size_t i = 0; i < cons.size(); ++i) {
+      const Eigen::Index o = off[i];
+      const double v = stick_x_[o], u = stick_u_[o];
+      if (cons[i].kind == ConstraintKind::kUnilateral && v == 0.0 && u >= 0.0) {
+        stick_pinned_.push_back(o);
+        stick_pinned_value_.push_back(0.0);
+      } else if (cons[i].kind == ConstraintKind::kBox) {
+        const double margin = kInsideMargin * (cons[i].upper - cons[i].lower);
+        if (std::abs(v - cons[i].lower) <= margin && u >= 0.0) {
+          stick_pinned_.push_back(o);
+          stick_pinned_value_.push_back(cons[i].lower);
+        } else if (std::abs(v - cons[i].upper) <= margin && u <= 0.0) {
+          stick_pinned_.push_back(o);
+          stick_pinned_value_.push_back(cons[i].upper);
+        }
+      }
+    }
   }
   // Refinement solves with the factor in hand: 1 converged, 0 unresolvable, -1 stalled (the
   // natural map not halved by a solve) or out of solves. first_map: the natural map after the first.
@@ -256,7 +275,8 @@ bool StickingStep::run(const ContactProblem& problem, Eigen::VectorXd& lam, doub
       refinementDirection(stick_u_, stick_d_);
       ++solves;
       stick_x_ -= stick_d_;
-      for (Eigen::Index o : stick_factor_pinned_) stick_x_[o] = 0.0;  // (it moved by ~u_o / pin shift)
+      for (std::size_t k = 0; k < stick_pinned_.size(); ++k)  // (each moved by ~u_o / the pin shift)
+        stick_x_[stick_pinned_[k]] = stick_pinned_value_[k];
       A.multiplyWithAbs(stick_x_, stick_u_, stick_abs_);
       stick_u_ -= problem.b();
       natural_map = naturalMapNorm(problem, stick_x_, stick_u_);

@@ -41,6 +41,8 @@ class NewtonSolver final : public ContactSolver {
 
   Eigen::VectorXd kappa_, diagonal_, u_, F_, trial_, step_;
   Eigen::VectorXd filtered_;  // eps (dF + eps I)^-1 d0, the part of the step d0 the filter removes
+  Eigen::VectorXd u_start_, step_image_;  // u at the iterate and A d (box rows: the line search's breakpoints)
+  std::vector<double> breakpoints_;
   Eigen::MatrixXd J_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
   SmallDenseLU small_lu_;

@@ -67,7 +67,7 @@ class StickingStep {
   static constexpr double kStepMatrixMaxCondition = 1e6;
   /// Refinement steps by the product with G that are cheaper than a fresh factor and its step.
   static constexpr int kHeldStepsWithProduct = 3;
-  /// A row held open (pinned at 0) gets this shift on its diagonal, relative to A's largest entry.
+  /// A row held on a bound (pinned) gets this shift on its diagonal, relative to A's largest entry.
   static constexpr double kPinShift = 1e8;
 
   /// True (lam replaced) when StoppingTest says converged; else lam is unchanged. `solves`: the
@@ -109,9 +109,11 @@ class StickingStep {
   bool stale_cheap_ = false;  // its last try converged in the steps worth taking (1, or with G a few)
   bool stick_used_held_ = false;  // the last sticking step converged with the held factor
   Eigen::VectorXd stick_diagonal_;         // this call's A's diagonal
-  // Unilateral rows held open at 0 (restingOnBounds): this call's, and the held factor's with the
-  // pin shift M on its diagonal (R = A + rho I + M P)
+  // Rows held on a bound (restingOnBounds; unilateral rows open at 0, box rows pressed on a bound):
+  // this call's with their values, and the held factor's, with the pin shift M on its diagonal
+  // (R = A + rho I + M P)
   std::vector<Eigen::Index> stick_pinned_, stick_factor_pinned_;
+  std::vector<double> stick_pinned_value_;
   double stick_factor_pin_shift_ = 0.0;
   // The held small dense factor's step matrix G = R^-1 - rho R^-2 (= R^-1 A_f R^-1), made on the
   // factor's first reuse: a robot standing reuses one factor for hundreds of steps, where the four
