@@ -234,8 +234,10 @@ bool StickingStep::run(const ContactProblem& problem, Eigen::VectorXd& lam, doub
   const double scale = stick_diagonal_.cwiseAbs().maxCoeff();
   if (!(scale > 0.0) || !std::isfinite(scale)) return false;
   // Rows that rest on a bound with u not pushing them off it are pinned there (restingOnBounds):
-  // unilateral rows the guess holds open (lambda = 0, u >= 0) stay open, and a box row on a bound
-  // that u presses against stays on it exactly. (Left free, the all-stick answer puts such a box
+  // unilateral rows the guess holds open (lambda = 0, u >= 0, or closing at most a millionth of b_o,
+  // their velocity with no force) stay open, and a box row on a bound that u presses against stays
+  // on it exactly. (A joint touching its limit with its dry friction beside it: the two rows are
+  // +-e_dof, and the all-stick correction split between them pulled on the limit; TALOS's grippers.) (Left free, the all-stick answer puts such a box
   // row a rounding past its bound, within the tolerance; the simulator's next guess clamps it back,
   // and every step then took a refinement: go2-stand with 0.5 N m friction.)
   stick_pinned_.clear();
@@ -246,7 +248,7 @@ bool StickingStep::run(const ContactProblem& problem, Eigen::VectorXd& lam, doub
     for (std::size_t i = 0; i < cons.size(); ++i) {
       const Eigen::Index o = off[i];
       const double v = stick_x_[o], u = stick_u_[o];
-      if (cons[i].kind == ConstraintKind::kUnilateral && v == 0.0 && u >= 0.0) {
+      if (cons[i].kind == ConstraintKind::kUnilateral && v == 0.0 && u >= -kInsideMargin * std::abs(problem.b()[o])) {
         stick_pinned_.push_back(o);
         stick_pinned_value_.push_back(0.0);
       } else if (cons[i].kind == ConstraintKind::kBox) {
