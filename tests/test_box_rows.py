@@ -201,6 +201,156 @@ def test_the_sticking_step_takes_box_rows_inside_their_interval():
         assert all(s == ContactState.stick for s in r.states)
 
 
+# ------------------------------------------------------------------ more rows than velocities
+
+def standing_robot_problem(seed, rows_on_bounds=0, irreducible=0.03, offset=3.0):
+    """A legged robot standing with dry friction on every joint, as the simulator poses it: 18
+    velocities (a free base and 12 joints), 4 spatial contacts and 12 box rows J = e_dof, so
+    A = J M^-1 J^T has 24 rows of rank 18 (statically indeterminate). The answer lam_stick sticks
+    everywhere (contacts inside their cones, friction rows inside |lambda| <= tau, `rows_on_bounds` of
+    them exactly on a bound with u = 0: a joint held by exactly its friction limit). b = A lam_stick
+    plus `irreducible` times the tolerance along A's null space (what a computed A's rounding leaves
+    out of its range), and the guess lam_stick moved along A's range by `offset` times the tolerance
+    (the previous step's answer). Returns the problem, the guess and the tolerance."""
+    rng = np.random.default_rng(seed)
+    nv, contacts, joints, mu, tau, tol = 18, 4, 12, 0.8, 5e-3, 1e-10
+    M = spd(rng, nv, cond=20.0)
+    J = np.vstack([rng.standard_normal((3 * contacts, nv)), np.hstack([np.zeros((joints, 6)), np.eye(joints)])])
+    A = J @ np.linalg.solve(M, J.T)
+    A = 0.5 * (A + A.T)
+    lam = np.empty(3 * contacts + joints)
+    for c in range(contacts):
+        normal, angle = rng.uniform(1.0, 2.0), rng.uniform(0.0, 2.0 * np.pi)
+        lam[3 * c:3 * c + 3] = [0.3 * mu * normal * np.cos(angle), 0.3 * mu * normal * np.sin(angle), normal]
+    lam[3 * contacts:] = rng.uniform(-0.8, 0.8, joints) * tau
+    lam[3 * contacts:3 * contacts + rows_on_bounds] = tau * np.sign(rng.standard_normal(rows_on_bounds))
+    U, sigma, _ = np.linalg.svd(A)
+    assert sigma[nv - 1] > 1e-8 * sigma[0] and sigma[nv] < 1e-12 * sigma[0]  # rank 18 of 24
+    b = A @ lam
+    threshold = tol * np.linalg.norm(b)
+    null = U[:, nv:] @ rng.standard_normal(len(b) - nv)
+    b = b + irreducible * threshold * null / np.linalg.norm(null)
+    along_range = U[:, :nv] @ rng.standard_normal(nv)
+    guess = lam + offset * threshold * along_range / np.linalg.norm(A @ along_range)
+    cons = [Constraint.spatial_friction(mu)] * contacts + [Constraint.box(-tau, tau)] * joints
+    return ContactProblem(np.asfortranarray(A), b, cons), guess, tol
+
+
+def natural_map(p, lam):
+    """||lambda - P_C(lambda - (u + mu |u_t| e_n))||, De Saxce's cones (eq. 76-77) and the boxes'
+    clamp, from A, b and lambda alone."""
+    A, b = np.asarray(p.A), np.asarray(p.b)
+    u = A @ lam - b
+    r = []
+    for c, o in zip(p.constraints, p.offsets):
+        if c.kind == stiction.ConstraintKind.box:
+            r.append(box_natural_map(lam[o], u[o], c.lower, c.upper))
+            continue
+        w = u[o:o + 3] + np.array([0.0, 0.0, c.mu * np.linalg.norm(u[o:o + 2])])
+        z = lam[o:o + 3] - w
+        t, n = np.linalg.norm(z[:2]), z[2]
+        if t <= c.mu * n:
+            proj = z
+        elif c.mu * t <= -n:
+            proj = np.zeros(3)
+        else:
+            a = (n + c.mu * t) / (1.0 + c.mu ** 2)
+            proj = np.array([c.mu * a * z[0] / t, c.mu * a * z[1] / t, a])
+        r.extend(lam[o:o + 3] - proj)
+    return float(np.linalg.norm(r))
+
+
+def assert_sticks_everywhere(p, lam, tol):
+    b = np.asarray(p.b)
+    scale = 2.0 * tol * np.linalg.norm(b)
+    assert natural_map(p, lam) <= scale
+    assert np.linalg.norm(np.asarray(p.A) @ lam - b) <= scale  # u = 0: every row holds
+    for c, o in zip(p.constraints, p.offsets):
+        if c.kind == stiction.ConstraintKind.box:
+            assert c.lower - scale <= lam[o] <= c.upper + scale
+        else:
+            assert np.linalg.norm(lam[o:o + 2]) < c.mu * lam[o + 2]
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("offset", [3.0, 30.0])
+def test_newton_converges_where_the_rows_outnumber_the_velocities(seed, offset):
+    # dF = K A is singular at every all-stick iterate, and the part of F no lambda cancels (3 % of the
+    # tolerance here, b's rounding out of A's range in a simulator's A) became a step as large as lambda
+    # along A's null space: out of the boxes, no descent (measured on anymal-stand with joint friction;
+    # here 14 of these 16 stalled after 5-22 steps). The step filtered to J's range converges in one.
+    p, guess, tol = standing_robot_problem(seed, offset=offset)
+    r = solve(p, "newton", guess, tol=tol)
+    assert r.converged and r.iterations <= 2, (r.message, r.iterations)
+    assert_sticks_everywhere(p, r.lam, tol)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_sticking_step_takes_box_rows_resting_on_their_bounds(seed):
+    # Joints held by exactly their friction limit (ProxQP's answer is a vertex of the box; a robot's
+    # joints stop slipping on it): the guess is not strictly inside, yet the all-stick answer holds.
+    # The default's first stage takes it (before: Newton, which stalled, then ProxQP).
+    p, guess, tol = standing_robot_problem(seed, rows_on_bounds=4)
+    r = solve(p, "default", guess, tol=tol)
+    assert r.message == "converged (sticking step)" and r.iterations == 1, (r.message, r.iterations)
+    assert_sticks_everywhere(p, r.lam, tol)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_real_misfit_along_the_null_space_still_makes_joints_slip(seed):
+    # b's part out of A's range far above the tolerance (a gap no joint motion closes while every joint
+    # sticks, as a UR5 pressing on a wall): no all-stick answer; Newton keeps its plain step there, and
+    # the box rows that must slip reach their bounds.
+    p, guess, tol = standing_robot_problem(seed, irreducible=1e5)
+    assert natural_map(p, guess) > 100 * tol * np.linalg.norm(np.asarray(p.b))
+    r = solve(p, "newton", guess, tol=tol)
+    assert r.converged, r.message
+    assert natural_map(p, r.lam) <= 2.0 * tol * np.linalg.norm(np.asarray(p.b))
+    assert check_box_complementarity(p, r.lam, tol) == 12
+    assert any(s == ContactState.slip for s in r.states[4:])
+
+
+def pressing_arm_problem(seed, misfit):
+    """A fixed-base arm (6 joints, dry friction on each) pressing a tool on a wall: 1 spatial contact
+    and 6 box rows, A of rank 6 in 9 rows. b has a part out of A's range `misfit` times the
+    tolerance (the contact's gap term, which no motion with every joint stuck fits): no all-stick
+    answer; some joints must slip, barely. The guess is an all-stick point (the previous step's)."""
+    rng = np.random.default_rng(seed)
+    nv, mu, tau, tol = 6, 0.5, 5e-4, 1e-10
+    M = spd(rng, nv, cond=20.0)
+    J = np.vstack([rng.standard_normal((3, nv)), np.eye(nv)])
+    A = J @ np.linalg.solve(M, J.T)
+    A = 0.5 * (A + A.T)
+    normal, angle = rng.uniform(0.05, 0.2), rng.uniform(0.0, 2.0 * np.pi)
+    lam = np.concatenate([[0.15 * normal * np.cos(angle), 0.15 * normal * np.sin(angle), normal],
+                          rng.uniform(-0.9, 0.9, nv) * tau])
+    U, _, _ = np.linalg.svd(A)
+    b = A @ lam
+    null = U[:, nv:] @ rng.standard_normal(3)
+    b = b + misfit * tol * np.linalg.norm(b) * null / np.linalg.norm(null)
+    cons = [Constraint.spatial_friction(mu)] + [Constraint.box(-tau, tau)] * nv
+    return ContactProblem(np.asfortranarray(A), b, cons), lam, tol
+
+
+@pytest.mark.parametrize("seed", range(10))
+@pytest.mark.parametrize("misfit", [5.0, 50.0])
+def test_newton_finds_the_joints_that_slip_barely(seed, misfit):
+    # Along A's null space u does not change: a joint can only take up the misfit by reaching its
+    # bound, and descent lies only just past the point where its row's z = lambda - kappa u crosses
+    # it (a window the line search's halvings missed: every one of these stalled, as a UR5 pressing
+    # on a wall did). The line search also tries those crossings.
+    p, guess, tol = pressing_arm_problem(seed, misfit)
+    r = solve(p, "newton", guess, tol=tol)
+    assert r.converged and r.iterations <= 30, (r.message, r.iterations)
+    b = np.asarray(p.b)
+    assert natural_map(p, r.lam) <= 2.0 * tol * np.linalg.norm(b)
+    assert check_box_complementarity(p, r.lam, tol) == 6
+    u = np.asarray(p.A) @ r.lam - b
+    slipping = [o for c, o in zip(p.constraints, p.offsets) if c.kind == stiction.ConstraintKind.box
+                and abs(u[o]) > 2.0 * tol * np.linalg.norm(b)]
+    assert slipping and all(abs(abs(r.lam[o]) - 5e-4) <= 2.0 * tol * np.linalg.norm(b) for o in slipping)
+
+
 # ------------------------------------------------------------------ mixed with friction cones
 
 def check_box_complementarity(p, lam, tol):

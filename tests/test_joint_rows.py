@@ -256,6 +256,41 @@ def test_solo12_standing_with_every_joint_row():
     assert np.all(np.abs(traj.joint_friction[1:, 6:]) <= 0.03)
 
 
+def test_anymal_standing_with_joint_friction_solves_every_step_in_the_cheap_stages():
+    """anymal-stand with dry friction 0.5 N m on its 12 joints: 12 contact and 12 joint rows for 18
+    velocities, a statically indeterminate A at every step. The joints slip under the PD until their
+    friction holds them (~0.2 s), then every row sticks. Every step is solved by the sticking step or
+    Newton within 20 iterations: before, Newton found no descent in over half the steps (its step ran
+    along A's null space) and ProxQP took over (~85 us a solve instead of ~3). The contacts carry the
+    weight (sum of normal forces = m g), every friction torque is within tau_c, and once settled no
+    joint moves."""
+    import tomllib
+
+    from stiction.resources import scenes_dir
+
+    cfg = tomllib.loads((scenes_dir() / "anymal-stand.toml").read_text())
+    cfg["joints"] = {"override": [{"joints": ["*_HAA", "*_HFE", "*_KFE"], "friction": 0.5}]}
+    sim = Simulator(build_scene(cfg))
+    stages, iterations = set(), []
+
+    def record_last_solve(s):
+        if s.data.t > 0.0:
+            stages.update(stage.name for stage in s.data.result.stages)
+            iterations.append(s.data.result.iterations)
+
+    traj = sim.rollout(1.0, callback=record_last_solve)
+    record_last_solve(sim)
+    assert len(iterations) == 1000 and traj.converged[1:].all()
+    assert stages <= {"sticking step", "newton"}, stages
+    assert max(iterations) <= 20
+    assert sorted(kind for kind, _ in sim.data.joint_rows).count("friction") == 12
+    model = sim.scene.model
+    mass = sum(model.inertias[j].mass for j in range(1, model.njoints))
+    assert abs(traj.lam[-1, :, 2].sum() - mass * G) <= 1e-6 * mass * G
+    assert np.all(np.abs(traj.joint_friction[1:, 6:]) <= 0.5 * (1.0 + 1e-6))  # (a sticking row: within the tolerance)
+    assert sim.summary(traj)["max_joint_drift"] <= 1e-12
+
+
 # ---- scene keys
 
 def test_joint_override_keys_are_checked():

@@ -55,6 +55,7 @@ ContactProblem::ContactProblem(std::shared_ptr<const DelassusOperator> delassus,
         !(std::isfinite(c.lower) && std::isfinite(c.upper) && c.lower <= 0.0 && c.upper >= 0.0))
       throw std::invalid_argument("ContactProblem: constraint " + std::to_string(i) + " (" + c.describe() +
                                   ") needs finite bounds lower <= 0 <= upper");
+    has_box_rows_ = has_box_rows_ || c.kind == ConstraintKind::kBox;
     offsets_.push_back(row);
     row += c.size;
   }

@@ -16,6 +16,14 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
+// The filtered Newton step (box rows) is taken when the part of F it leaves is below this share of
+// the stopping test's threshold.
+constexpr double kFilteredShare = 0.5;
+// With box rows, a line search without descent also tries the first few points where a box or
+// unilateral row's natural-map argument crosses a bound, this far (relative) past each.
+constexpr int kBreakpointTrials = 8;
+constexpr double kPastBreakpoint = 1e-9;
+
 // Jacobian of the projection onto {||x_t|| <= mu x_n} (k = 2 or 3, normal last).
 template <int K>
 Eigen::Matrix<double, K, K> coneProjectionJacobian(const Eigen::Matrix<double, K, 1>& z, double mu) {
@@ -394,6 +402,16 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
     const double tr = diagonal_.segment(off[i], cons[i].size).sum();
     kappa_[i] = tr > 0.0 ? cons[i].size / tr : 1.0;
   }
+  // With box rows (a robot's joint friction, effort limits) the step may be filtered to J's
+  // numerical range (below). A robot standing with every joint's friction row has more rows than
+  // velocities (ANYmal: 12 contact + 12 joint rows, rank <= 18): at every all-stick iterate
+  // dF = K A is singular, and the part of F no lambda can cancel (b's rounding out of A's range,
+  // ~3 % of the tolerance there) became a plain step r_0 / eps along A's null space, as large as
+  // lambda itself with eps ~ ||F||: it left the boxes and the line search found no descent
+  // (anymal-stand with 0.5 N m friction: over half the steps stalled and fell back to ProxQP).
+  // Contact-only problems keep the plain step (their measured paths, FCLib; the sticking step
+  // covers their usual rank-deficient case, a sole's or a tower's all-stick solution).
+  const bool filter_null_space = !uncoupled_ && problem.hasBoxRows();
   message = "iteration limit reached";
   int step = 0;
   constexpr int kHistory = 4;
@@ -401,7 +419,8 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
   evaluate(problem, lam, false);  // the Jacobian only once a step is needed
   double f_norm = F_.norm();
   for (; step < max_steps; ++step) {
-    const StoppingTest::Outcome outcome = test.check(lam, u_, naturalMapNorm(problem, lam, u_));
+    const double natural_map = naturalMapNorm(problem, lam, u_);
+    const StoppingTest::Outcome outcome = test.check(lam, u_, natural_map);
     if (outcome != StoppingTest::kContinue) {
       message = outcome == StoppingTest::kConverged ? "converged" : kUnresolvableMessage;
       break;
@@ -440,6 +459,28 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
       message = "singular Newton system";
       break;
     }
+    if (filter_null_space) {
+      // d = (J + eps I)^-1 J d0 = d0 - eps (J + eps I)^-1 d0: one more solve with the factor in hand
+      // (iterated Tikhonov). Along a direction J nearly annihilates (sigma << eps) the step d0 is
+      // -F_sigma / eps and d only sigma F_sigma / eps^2; elsewhere the two agree to O(eps / sigma).
+      // By the linear model d0 leaves F + J d0 = -eps d0 and d leaves F + J d = -eps (d0 + d): the
+      // part of F along those directions, which no step near this active set cancels. d is taken
+      // when that part is below half the tolerance (in the natural map's units: F is K u where
+      // every block sticks): rounding the answer need not cancel. Above it the part is real (a
+      // UR5 pushing on a wall, whose gap term asks the joints for a slip of 1e-9 at 50 times the
+      // tolerance): a box row has to reach its bound, and the plain step's long move along those
+      // directions leads there (its line search tries where rows cross their bounds, below).
+      filtered_ = eps * step_;
+      if (sparse_) {
+        filtered_ = sparse_lu_.solve(filtered_);
+      } else if (m <= SmallDenseLU::kMaxRows) {
+        small_lu_.solve(filtered_);
+      } else {
+        filtered_ = lu_.solve(filtered_);
+      }
+      const double left = eps * (2.0 * step_ - filtered_).norm();
+      if (filtered_.allFinite() && left * natural_map <= kFilteredShare * test.threshold() * f_norm) step_ -= filtered_;
+    }
     // Non-monotone backtracking on ||F|| (against the worst of the last few
     // values): the natural map is only semismooth, a strict decrease test
     // rejects good steps across kinks.
@@ -447,17 +488,48 @@ int NewtonSolver::run(const ContactProblem& problem, Eigen::VectorXd& lam, int m
     for (double h : history) reference = std::max(reference, h);
     double t = 1.0, best_norm = kInf, best_t = 0.0;
     bool best_is_last = false;  // u_ and F_ hold the best trial's values
+    bool sufficient = false;
     trial_.resize(m);
-    for (int ls = 0; ls < 20; ++ls, t *= 0.5) {
-      trial_ = lam + t * step_;
+    if (filter_null_space) u_start_ = u_;  // (A d from the first trial, for the breakpoints below)
+    auto try_step = [&](double t_try) {
+      trial_ = lam + t_try * step_;
       evaluate(problem, trial_, false);
       const double n = F_.norm();
       best_is_last = n < best_norm;
       if (best_is_last) {
         best_norm = n;
-        best_t = t;
+        best_t = t_try;
       }
-      if (n <= (1.0 - 1e-4 * t) * reference) break;
+      sufficient = n <= (1.0 - 1e-4 * t_try) * reference;
+    };
+    for (int ls = 0; ls < 20 && !sufficient; ++ls, t *= 0.5) {
+      try_step(t);
+      if (ls == 0 && filter_null_space) step_image_ = u_ - u_start_;  // A d
+    }
+    if (!sufficient && filter_null_space) {
+      // Where a box row must reach its bound (a joint that slips, barely: the part of F no step on
+      // this active set cancels is a few times the tolerance), descent lies only just past the point
+      // where the row's z = lambda - kappa u crosses its bound (z is linear in t: A d is the first
+      // trial's u less the iterate's): there its kappa u leaves F and lambda - bound starts from 0.
+      // That window (4e-5 of the step's length on go2-stand) falls between the halvings above,
+      // which then found no descent: Newton stalled, and ProxQP or ADMM took over (~60-130 us). The
+      // first few crossings are tried, in order, just past each.
+      breakpoints_.clear();
+      for (std::size_t i = 0; i < cons.size(); ++i) {
+        if (cons[i].kind != ConstraintKind::kBox && cons[i].kind != ConstraintKind::kUnilateral) continue;
+        const Eigen::Index o = off[i];
+        const double z0 = lam[o] - kappa_[i] * u_start_[o];
+        const double dz = step_[o] - kappa_[i] * step_image_[o];
+        const double lo = cons[i].kind == ConstraintKind::kBox ? cons[i].lower : 0.0;
+        const double hi = cons[i].kind == ConstraintKind::kBox ? cons[i].upper : kInf;
+        for (double bound : {lo, hi}) {
+          const double tc = (bound - z0) / dz;
+          if (tc > 0.0 && tc < 1.0) breakpoints_.push_back(tc * (1.0 + kPastBreakpoint));
+        }
+      }
+      std::sort(breakpoints_.begin(), breakpoints_.end());
+      const std::size_t tried = std::min<std::size_t>(breakpoints_.size(), kBreakpointTrials);
+      for (std::size_t k = 0; k < tried && !sufficient; ++k) try_step(breakpoints_[k]);
     }
     if (!(best_norm < reference)) {
       message = "stalled (no descent along the Newton direction)";

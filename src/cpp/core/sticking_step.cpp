@@ -19,47 +19,109 @@ namespace stiction {
 // first shifted by De Saxce's term, x_n - mu |x_t| (see stickingAtZero).
 constexpr double kInsideMargin = 1e-6;
 
+namespace {
+
+// A_oo (one entry of A's diagonal).
+double diagonalEntry(const ContactProblem& problem, Eigen::Index o) {
+  double a_oo = 0.0;
+  Eigen::Map<Eigen::MatrixXd> entry(&a_oo, 1, 1);
+  problem.delassus().diagonalBlock(o, 1, entry);
+  return a_oo;
+}
+
+// Block i of x strictly inside its cone (strictlyInsideCones, one block).
+bool blockStrictlyInside(const ContactProblem& problem, std::size_t i, const Eigen::VectorXd& x, bool de_saxce) {
+  const Constraint& c = problem.constraints()[i];
+  const Eigen::Index o = problem.offsets()[i];
+  const double mu = c.mu;
+  const double shift = de_saxce ? 1.0 : 0.0;
+  switch (c.kind) {
+    case ConstraintKind::kBilateral: return true;
+    case ConstraintKind::kUnilateral: return x[o] > 0.0;
+    case ConstraintKind::kPlanarFriction: {
+      const double t = std::abs(x[o]);
+      return t < (1.0 - kInsideMargin) * mu * (x[o + 1] - shift * mu * t);
+    }
+    case ConstraintKind::kSpatialFriction: {
+      const double t = norm2(x[o], x[o + 1]);
+      return t < (1.0 - kInsideMargin) * mu * (x[o + 2] - shift * mu * t);
+    }
+    case ConstraintKind::kBox: {
+      // strictly inside the interval, by the margin; de_saxce (x = b, lambda = 0): the natural map's
+      // argument there, b / A_oo (Newton's kappa = 1 / A_oo; a row that moves nothing: b = 0)
+      double v = x[o];
+      if (de_saxce) {
+        const double a_oo = diagonalEntry(problem, o);
+        if (!(a_oo > 0.0)) {
+          if (x[o] != 0.0) return false;
+        } else {
+          v = x[o] / a_oo;
+        }
+      }
+      const double margin = kInsideMargin * (c.upper - c.lower);
+      return v > c.lower + margin && v < c.upper - margin;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
 bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& x, bool de_saxce) {
+  for (std::size_t i = 0; i < problem.numBlocks(); ++i)
+    if (!blockStrictlyInside(problem, i, x, de_saxce)) return false;
+  return true;
+}
+
+namespace {
+
+// Rows can be held on a bound (pinned) in the dense factor: a dense A of up to kDenseFactorRows
+// rows, with box rows (contact-only problems keep their all-stick test).
+bool canPin(const ContactProblem& problem) {
+  return problem.hasBoxRows() && problem.delassus().sparse() == nullptr && problem.numRows() <= kDenseFactorRows;
+}
+
+}  // namespace
+
+bool restingOnBounds(const ContactProblem& problem, const Eigen::VectorXd& lam) {
+  if (!problem.hasBoxRows()) return false;
+  const bool pin = canPin(problem);
   const auto& cons = problem.constraints();
   const auto& off = problem.offsets();
-  const double shift = de_saxce ? 1.0 : 0.0;
+  // A box row within the margin of a bound: -1 lower, +1 upper; 0 strictly inside (or not a box row)
+  auto side = [&](std::size_t i) -> int {
+    const Constraint& c = cons[i];
+    if (c.kind != ConstraintKind::kBox) return 0;
+    const double v = lam[off[i]], margin = kInsideMargin * (c.upper - c.lower);
+    if (v > c.lower + margin && v < c.upper - margin) return 0;
+    return std::abs(v - c.lower) <= margin ? -1 : std::abs(v - c.upper) <= margin ? 1 : 2;
+  };
+  bool on_bound = false;
   for (std::size_t i = 0; i < cons.size(); ++i) {
-    const Eigen::Index o = off[i];
-    const double mu = cons[i].mu;
-    switch (cons[i].kind) {
-      case ConstraintKind::kBilateral: break;
-      case ConstraintKind::kUnilateral:
-        if (!(x[o] > 0.0)) return false;
-        break;
-      case ConstraintKind::kPlanarFriction: {
-        const double t = std::abs(x[o]);
-        if (!(t < (1.0 - kInsideMargin) * mu * (x[o + 1] - shift * mu * t))) return false;
-        break;
-      }
-      case ConstraintKind::kSpatialFriction: {
-        const double t = norm2(x[o], x[o + 1]);
-        if (!(t < (1.0 - kInsideMargin) * mu * (x[o + 2] - shift * mu * t))) return false;
-        break;
-      }
-      case ConstraintKind::kBox: {
-        // strictly inside the interval, by the margin; de_saxce (x = b, lambda = 0): the natural map's
-        // argument there, b / A_oo (Newton's kappa = 1 / A_oo; a row that moves nothing: b = 0)
-        double v = x[o];
-        if (de_saxce) {
-          double a_oo = 0.0;
-          Eigen::Map<Eigen::MatrixXd> entry(&a_oo, 1, 1);
-          problem.delassus().diagonalBlock(o, 1, entry);
-          if (!(a_oo > 0.0)) {
-            if (x[o] != 0.0) return false;
-          } else {
-            v = x[o] / a_oo;
-          }
-        }
-        const double lo = cons[i].lower, hi = cons[i].upper, margin = kInsideMargin * (hi - lo);
-        if (!(v > lo + margin && v < hi - margin)) return false;
-        break;
-      }
+    if (blockStrictlyInside(problem, i, lam, false)) continue;
+    if (pin && cons[i].kind == ConstraintKind::kUnilateral && lam[off[i]] == 0.0) {
+      on_bound = true;  // (held open by the sticking step when u >= 0 there, else closed by it)
+      continue;
     }
+    const int s = side(i);
+    if (s != -1 && s != 1) return false;
+    on_bound = true;
+  }
+  if (!on_bound) return false;
+  // Each row on a bound: the natural map's argument z = lambda - u / A_oo at the guess
+  // (u = A lambda - b) within the margin of the interval: u does not push it off its bound.
+  thread_local Eigen::VectorXd u;
+  u.resize(problem.numRows());
+  problem.delassus().multiply(lam, u);
+  u -= problem.b();
+  for (std::size_t i = 0; i < cons.size(); ++i) {
+    const int s = side(i);
+    if (s == 0) continue;
+    const Eigen::Index o = off[i];
+    const double a_oo = diagonalEntry(problem, o);
+    if (!(a_oo > 0.0)) return false;  // (a row that moves nothing: its u = -b whatever lambda)
+    const double push = (s > 0 ? -u[o] : u[o]) / a_oo;  // how far past the bound z lies
+    if (!(push <= kInsideMargin * (cons[i].upper - cons[i].lower))) return false;
   }
   return true;
 }
@@ -76,7 +138,8 @@ bool stickingAtZero(const ContactProblem& problem) {
 }
 
 bool stickingGuess(const ContactProblem& problem, const Eigen::VectorXd& lam) {
-  return strictlyInsideCones(problem, lam) || (lam.isZero(0.0) && stickingAtZero(problem));
+  return strictlyInsideCones(problem, lam) || (lam.isZero(0.0) && stickingAtZero(problem)) ||
+         restingOnBounds(problem, lam);
 }
 
 bool StickingStep::factorShifted(const ContactProblem& problem, double shift) {
@@ -106,6 +169,7 @@ bool StickingStep::factorShifted(const ContactProblem& problem, double shift) {
     stick_from_dense_ = S != nullptr;
   }
   stick_sparse_path_ = S != nullptr;
+  if (stick_sparse_path_ && !stick_pinned_.empty()) return false;  // (canPin: not reached)
   if (stick_sparse_path_) {
     // The ordering (AMD) and symbolic factor are kept while A's pattern stays (the same contacts
     // from step to step).
@@ -143,6 +207,9 @@ bool StickingStep::factorShifted(const ContactProblem& problem, double shift) {
   }
   stick_shifted_ = problem.delassus().dense();
   stick_shifted_.diagonal().array() += shift;
+  // a pinned row's large shift holds it out of the system: R^-1 is (R_SS)^-1 on the others, to
+  // O(1 / kPinShift), and ~0 on it
+  for (Eigen::Index o : stick_pinned_) stick_shifted_(o, o) += kPinShift / kStickShift * shift;
   stick_llt_.compute(stick_shifted_);
   return stick_llt_.info() == Eigen::Success;
 }
@@ -166,6 +233,36 @@ bool StickingStep::run(const ContactProblem& problem, Eigen::VectorXd& lam, doub
   A.diagonal(stick_diagonal_);
   const double scale = stick_diagonal_.cwiseAbs().maxCoeff();
   if (!(scale > 0.0) || !std::isfinite(scale)) return false;
+  // Rows that rest on a bound with u not pushing them off it are pinned there (restingOnBounds):
+  // unilateral rows the guess holds open (lambda = 0, u >= 0, or closing at most a millionth of b_o,
+  // their velocity with no force) stay open, and a box row on a bound that u presses against stays
+  // on it exactly. (A joint touching its limit with its dry friction beside it: the two rows are
+  // +-e_dof, and the all-stick correction split between them pulled on the limit; TALOS's grippers.) (Left free, the all-stick answer puts such a box
+  // row a rounding past its bound, within the tolerance; the simulator's next guess clamps it back,
+  // and every step then took a refinement: go2-stand with 0.5 N m friction.)
+  stick_pinned_.clear();
+  stick_pinned_value_.clear();
+  if (canPin(problem)) {
+    const auto& cons = problem.constraints();
+    const auto& off = problem.offsets();
+    for (std::size_t i = 0; i < cons.size(); ++i) {
+      const Eigen::Index o = off[i];
+      const double v = stick_x_[o], u = stick_u_[o];
+      if (cons[i].kind == ConstraintKind::kUnilateral && v == 0.0 && u >= -kInsideMargin * std::abs(problem.b()[o])) {
+        stick_pinned_.push_back(o);
+        stick_pinned_value_.push_back(0.0);
+      } else if (cons[i].kind == ConstraintKind::kBox) {
+        const double margin = kInsideMargin * (cons[i].upper - cons[i].lower);
+        if (std::abs(v - cons[i].lower) <= margin && u >= 0.0) {
+          stick_pinned_.push_back(o);
+          stick_pinned_value_.push_back(cons[i].lower);
+        } else if (std::abs(v - cons[i].upper) <= margin && u <= 0.0) {
+          stick_pinned_.push_back(o);
+          stick_pinned_value_.push_back(cons[i].upper);
+        }
+      }
+    }
+  }
   // Refinement solves with the factor in hand: 1 converged, 0 unresolvable, -1 stalled (the
   // natural map not halved by a solve) or out of solves. first_map: the natural map after the first.
   double natural_map = initial_map, first_map = -1.0;
@@ -180,6 +277,8 @@ bool StickingStep::run(const ContactProblem& problem, Eigen::VectorXd& lam, doub
       refinementDirection(stick_u_, stick_d_);
       ++solves;
       stick_x_ -= stick_d_;
+      for (std::size_t k = 0; k < stick_pinned_.size(); ++k)  // (each moved by ~u_o / the pin shift)
+        stick_x_[stick_pinned_[k]] = stick_pinned_value_[k];
       A.multiplyWithAbs(stick_x_, stick_u_, stick_abs_);
       stick_u_ -= problem.b();
       natural_map = naturalMapNorm(problem, stick_x_, stick_u_);
@@ -234,6 +333,8 @@ bool StickingStep::run(const ContactProblem& problem, Eigen::VectorXd& lam, doub
   }
   stick_factor_rows_ = problem.numRows();
   stick_factor_shift_ = kStickShift * scale;
+  stick_factor_pinned_ = stick_pinned_;
+  stick_factor_pin_shift_ = kPinShift * scale;
   stick_step_state_ = StepMatrix::kNone;  // (a fresh factor's own step: the solves)
   stick_factor_diagonal_ = stick_diagonal_;
   if (refine() == 1) {
@@ -251,6 +352,7 @@ void StickingStep::refinementDirection(const Eigen::VectorXd& r, Eigen::VectorXd
   // (A R^-1 r = r - rho R^-1 r: the filter costs a second solve, not a product)
   solveShifted(r, d);
   stick_w_ = r - stick_factor_shift_ * d;
+  for (Eigen::Index o : stick_factor_pinned_) stick_w_[o] -= stick_factor_pin_shift_ * d[o];  // (A = R - rho I - M P)
   solveShifted(stick_w_, d);
 }
 
@@ -258,6 +360,7 @@ void StickingStep::prepareStepMatrix() {
   stick_step_state_ = StepMatrix::kRefused;
   const Eigen::Index m = stick_factor_rows_;
   if (stick_sparse_path_ || m <= 0 || m > kStickSmallRows || stick_shifted_.rows() != m) return;
+  if (!stick_factor_pinned_.empty()) return;  // (its pivots' spread refuses it anyway)
   // Explicit inverses are as accurate as the solves only while R is well conditioned; near a
   // rank-deficient A (a sole's four corners: R^-1 ~ 1 / rho along A's null space) R^-1 - rho R^-2
   // would cancel to nothing. The pivots bound cond(R) from below (free: TALOS's soles, 1e11, stop
@@ -309,6 +412,7 @@ void StickingStep::solveShifted(const Eigen::VectorXd& rhs, Eigen::VectorXd& x) 
 bool StickingStep::heldFactorFits(const ContactProblem& problem) const {
   const Eigen::Index m = problem.numRows();
   if (stick_factor_rows_ != m || stick_factor_diagonal_.size() != m || stick_diagonal_.size() != m) return false;
+  if (stick_pinned_ != stick_factor_pinned_) return false;
   // the same rows (a cheap fingerprint: A's diagonal, stick_diagonal_, within kStaleDiagonalChange of
   // the factored one's)
   const double scale = stick_factor_diagonal_.cwiseAbs().maxCoeff();

@@ -47,6 +47,8 @@ class ContactProblem {
 
   Eigen::Index numRows() const { return b_.size(); }
   std::size_t numBlocks() const { return constraints_.size(); }
+  /// Some block is a box row (a joint's dry friction or effort limit).
+  bool hasBoxRows() const { return has_box_rows_; }
   double asymmetry() const { return asymmetry_; }
   bool isSymmetric() const { return asymmetry_ == 0.0; }
 
@@ -60,6 +62,7 @@ class ContactProblem {
   std::vector<Constraint> constraints_;
   std::vector<Eigen::Index> offsets_;
   double asymmetry_ = 0.0;
+  bool has_box_rows_ = false;
 };
 
 }  // namespace stiction

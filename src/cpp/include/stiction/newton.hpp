@@ -5,7 +5,9 @@
 // with kappa_i = 1 / ||A_ii|| per block (unit-consistent). Each step solves
 // (dF + eps I) d = -F with a dense LU, eps ~ ||F|| (Levenberg-Marquardt style:
 // keeps the step defined where A is rank-deficient, e.g. sticking contacts with
-// more rows than degrees of freedom), then backtracks on ||F||.
+// more rows than degrees of freedom), then backtracks on ||F||. With box rows the step is
+// filtered to the factor's numerical range, d = (dF + eps I)^-1 dF d0, when what that drops is
+// below the tolerance (docs/solvers.md, "More rows than velocities").
 // Converges in a few steps where Gauss-Seidel stalls (large mass ratios).
 #pragma once
 
@@ -38,6 +40,9 @@ class NewtonSolver final : public ContactSolver {
   void solveUncoupled(const ContactProblem& problem, double eps);
 
   Eigen::VectorXd kappa_, diagonal_, u_, F_, trial_, step_;
+  Eigen::VectorXd filtered_;  // eps (dF + eps I)^-1 d0, the part of the step d0 the filter removes
+  Eigen::VectorXd u_start_, step_image_;  // u at the iterate and A d (box rows: the line search's breakpoints)
+  std::vector<double> breakpoints_;
   Eigen::MatrixXd J_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
   SmallDenseLU small_lu_;

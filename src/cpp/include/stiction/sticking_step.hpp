@@ -25,9 +25,22 @@ bool strictlyInsideCones(const ContactProblem& problem, const Eigen::VectorXd& x
 /// cones once shifted by De Saxce's term (sticking_step.cpp).
 bool stickingAtZero(const ContactProblem& problem);
 
+/// Every block of lam strictly inside its cone but some box rows (a joint's dry friction, effort
+/// limit) within the margin of a bound that rest there: at lam the natural map's argument
+/// z = lam_o - u_o / A_oo (u = A lam - b) lies within the margin of the interval, the sticking
+/// regime. A joint held by exactly its friction limit (a standing robot's joints once they slipped
+/// to rest; ProxQP's solution, a vertex of the box) rests; a slipping joint, whose velocity puts z
+/// past its bound, does not (anymal-stand: z inside at rest, 1e3-1e7 margins past while slipping).
+/// In a dense A of up to kDenseFactorRows rows, unilateral rows at 0 too (a joint limit touched
+/// with no force): the sticking step holds those that u keeps open there (pinned at 0) and closes
+/// the others (TALOS's grippers rest on their limits, some open by 2e-14 rad: an all-stick answer
+/// would pull on them, twice the tolerance). False without box rows (no product then).
+bool restingOnBounds(const ContactProblem& problem, const Eigen::VectorXd& lam);
+
 /// The guess `lam` predicts the all-stick solution: strictly inside every cone (a warm start where
 /// every contact was closed and sticking: a robot standing, a box at rest, a tower), or zero with
-/// every block sticking there (a cold problem at rest: CubesH8).
+/// every block sticking there (a cold problem at rest: CubesH8), or inside but for box rows resting on
+/// their bounds (restingOnBounds).
 bool stickingGuess(const ContactProblem& problem, const Eigen::VectorXd& lam);
 
 /// The all-stick solution near lam: from x = lam, steps d = R^-1 A R^-1 (b - A x) with
@@ -54,6 +67,8 @@ class StickingStep {
   static constexpr double kStepMatrixMaxCondition = 1e6;
   /// Refinement steps by the product with G that are cheaper than a fresh factor and its step.
   static constexpr int kHeldStepsWithProduct = 3;
+  /// A row held on a bound (pinned) gets this shift on its diagonal, relative to A's largest entry.
+  static constexpr double kPinShift = 1e8;
 
   /// True (lam replaced) when StoppingTest says converged; else lam is unchanged. `solves`: the
   /// refinement steps done (two solves each).
@@ -94,6 +109,12 @@ class StickingStep {
   bool stale_cheap_ = false;  // its last try converged in the steps worth taking (1, or with G a few)
   bool stick_used_held_ = false;  // the last sticking step converged with the held factor
   Eigen::VectorXd stick_diagonal_;         // this call's A's diagonal
+  // Rows held on a bound (restingOnBounds; unilateral rows open at 0, box rows pressed on a bound):
+  // this call's with their values, and the held factor's, with the pin shift M on its diagonal
+  // (R = A + rho I + M P)
+  std::vector<Eigen::Index> stick_pinned_, stick_factor_pinned_;
+  std::vector<double> stick_pinned_value_;
+  double stick_factor_pin_shift_ = 0.0;
   // The held small dense factor's step matrix G = R^-1 - rho R^-2 (= R^-1 A_f R^-1), made on the
   // factor's first reuse: a robot standing reuses one factor for hundreds of steps, where the four
   // triangular solves of a step (their divisions in a chain) cost 4x the product.
