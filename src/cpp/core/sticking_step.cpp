@@ -96,18 +96,18 @@ bool restingOnBounds(const ContactProblem& problem, const Eigen::VectorXd& lam) 
     if (v > c.lower + margin && v < c.upper - margin) return 0;
     return std::abs(v - c.lower) <= margin ? -1 : std::abs(v - c.upper) <= margin ? 1 : 2;
   };
-  bool on_bound = false;
+  bool on_bound = false, box_on_bound = false;
   for (std::size_t i = 0; i < cons.size(); ++i) {
     if (blockStrictlyInside(problem, i, lam, false)) continue;
     if (pin && cons[i].kind == ConstraintKind::kUnilateral && lam[off[i]] == 0.0) {
-      on_bound = true;  // (held open by the sticking step when u >= 0 there, else closed by it)
+      on_bound = true;  // (held open by the sticking step when u lets it, else closed by it)
       continue;
     }
     const int s = side(i);
     if (s != -1 && s != 1) return false;
-    on_bound = true;
+    on_bound = box_on_bound = true;
   }
-  if (!on_bound) return false;
+  if (!box_on_bound) return on_bound;  // (unilateral rows at 0 only: no product)
   // Each row on a bound: the natural map's argument z = lambda - u / A_oo at the guess
   // (u = A lambda - b) within the margin of the interval: u does not push it off its bound.
   thread_local Eigen::VectorXd u;
