@@ -55,7 +55,7 @@ class Trajectory:
     rows (N, nc) rows each contact used in the step (3 spatial, 2 planar, 1 frictionless or
     mu = 0, 0 inactive; None in files saved before it was recorded).
     The joints (docs/joint-rows.md): tau (N, nv) the actuator torque applied over the step
-    (feed-forward + PD, the implicit PD's at the step's end, after the effort limit: |tau| never
+    (feed-forward + PD, the implicit PD's at the step's end, after the effort limit: abs(tau) never
     exceeds it); joint_friction (N, nv) the joints' dry friction torque and limit_torque (N, nv) the
     position limits' torque, 0 where the joint had no such row (all three NaN in record 0; None in
     files saved before they were recorded).
@@ -535,7 +535,7 @@ def _joint_measures(model: pin.Model, settings, traj: Trajectory, settled_from: 
     """The joints' measures of a summary (docs/joint-rows.md): max_limit_overshoot, the farthest a 1-dof
     joint went past a position limit (rad or m, over every record; 0 with joint_limits off: nothing
     enforced them); max_joint_drift, the largest motion of a 1-dof joint from where it was at settle_time;
-    max_effort_ratio, the largest |tau| / effort limit of an actuator over the steps (<= 1: the limit holds;
+    max_effort_ratio, the largest abs(tau) / effort limit of an actuator over the steps (<= 1: the limit holds;
     None without effort limits); saturated_steps, the steps in which some actuator sat at its limit."""
     overshoot, drift = 0.0, 0.0
     effort = np.asarray(model.effortLimit, dtype=float)
