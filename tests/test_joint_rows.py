@@ -349,3 +349,26 @@ def test_joint_rows_meet_the_exact_law():
     assert r.converged and r.residual <= 1e-10
     assert any(kind == "friction" for kind, _ in sim.data.joint_rows)
     assert stiction.Constraint.box(-1.0, 1.0).kind == stiction.ConstraintKind.box
+
+
+def test_inspected_problem_carries_the_actuators_compliance():
+    """build_contact_problem with the implicit PD's step h (the problem a step solves, for inspection):
+    A = J M^-1 J^T (M with the PD on the diagonal of the actuators without a row) plus 1 / (h K) on each
+    effort row's diagonal, K = kd + h kp; nothing else."""
+    from stiction import _core
+
+    sim = Simulator("solo12-effort-limit")
+    sim.rollout(0.004)  # saturating: effort rows in the problem
+    q, v, h = np.asarray(sim.data.q).copy(), np.asarray(sim.data.v).copy(), sim.dt
+    _core.build_contact_problem(sim.model, sim.data, q, v, h, 0.5, h)
+    rows = sim.data.joint_rows
+    assert any(kind == "effort" for kind, _ in rows)
+    J, M, A = np.asarray(sim.data.J), np.asarray(sim.data.M), np.asarray(sim.data.A)
+    extra = A - J @ np.linalg.solve(M, J.T)
+    expected = np.zeros_like(A)
+    first = A.shape[0] - len(rows)
+    kp, kd = np.asarray(sim.data.kp), np.asarray(sim.data.kd)
+    for k, (kind, dof) in enumerate(rows):
+        if kind == "effort":
+            expected[first + k, first + k] = 1.0 / (h * (kd[dof] + h * kp[dof]))
+    assert np.abs(extra - expected).max() <= 1e-9 * np.abs(A).max()

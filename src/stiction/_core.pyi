@@ -536,8 +536,8 @@ class WarmStart(int):
 def batch_rollout(sims: Any, datas: Any, n_steps: int, record_every: int = ..., threads: Any = ...) -> list:
     """independent rollouts of (sims[i], datas[i]) on a pool of C++ threads (0: one per core), the GIL released; a list of dicts as rollout's, each with 'error' (None, or why it stopped)"""
 
-def build_contact_problem(sim: SimulatorModel, data: SimulatorData, q: numpy.typing.ArrayLike, v: numpy.typing.ArrayLike, delta: float, zeta: float) -> None:
-    """fill data.J, A, b (eq. 27), drift, position_error and active at (q, v)"""
+def build_contact_problem(sim: SimulatorModel, data: SimulatorData, q: numpy.typing.ArrayLike, v: numpy.typing.ArrayLike, delta: float, zeta: float, implicit_pd_step: float = ...) -> None:
+    """fill data.J, A, b (eq. 27), drift, position_error and active at (q, v); implicit_pd_step = h > 0: the joint PD implicit over h, as a time step builds it (M's diagonal, the actuators' effort rows)"""
 
 def contact_centers(sim: SimulatorModel, Q: Any) -> numpy.ndarray:
     """world position of every sphere contact's centre at each configuration (a row of Q): N x (3 contacts)"""

@@ -22,7 +22,7 @@ _TYPES = {
 # same name means different things).
 _ARG_TYPES = {
     "rows": "int", "n_steps": "int", "record_every": "int", "initial_contacts": "bool",
-    "mu": "float", "delta": "float", "zeta": "float", "relative_speed_floor": "float",
+    "mu": "float", "delta": "float", "zeta": "float", "relative_speed_floor": "float", "implicit_pd_step": "float",
     "asymmetry_tolerance": "float",
     "A": "numpy.typing.ArrayLike", "b": "numpy.typing.ArrayLike", "lam": "numpy.typing.ArrayLike",
     "q": "numpy.typing.ArrayLike", "v": "numpy.typing.ArrayLike", "guess": "numpy.typing.ArrayLike | None",

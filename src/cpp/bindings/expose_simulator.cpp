@@ -225,7 +225,7 @@ SimulatorData& dataArg(const bp::object& x, const char* fn) {
 void doStep(const bp::object& sim, const bp::object& data) { step(simArg(sim, "step"), dataArg(data, "step")); }
 
 void doBuild(const bp::object& sim_, const bp::object& data, const bp::object& q_, const bp::object& v_,
-             const bp::object& delta_, const bp::object& zeta_) {
+             const bp::object& delta_, const bp::object& zeta_, const bp::object& implicit_pd_step_) {
   const SimulatorModel& sim = simArg(sim_, "build_contact_problem");
   SimulatorData& d = dataArg(data, "build_contact_problem");
   const Eigen::VectorXd q = toVector(q_, "build_contact_problem: q", sim.model.nq);
@@ -233,7 +233,10 @@ void doBuild(const bp::object& sim_, const bp::object& data, const bp::object& q
   const double delta = toDouble(delta_, "build_contact_problem: delta");
   const double zeta = toDouble(zeta_, "build_contact_problem: zeta");
   if (!(delta > 0.0) || !(zeta > 0.0)) throw std::invalid_argument("delta and zeta must be positive");
-  buildContactProblem(sim, d, q, v, delta, zeta);
+  const double pd_step = toDouble(implicit_pd_step_, "build_contact_problem: implicit_pd_step");
+  if (!(pd_step >= 0.0) || !std::isfinite(pd_step))
+    throw std::invalid_argument("build_contact_problem: implicit_pd_step must be finite and >= 0 (0: an explicit PD)");
+  buildContactProblem(sim, d, q, v, delta, zeta, pd_step);
 }
 
 // A numpy float64 array (rows x cols, or a vector when cols < 0) over a copy of `count` doubles:
@@ -584,8 +587,10 @@ void exposeSimulator() {
       "world placement of every joint at each configuration (a row of Q): N x (12 joints), per joint the "
       "rotation (column-major) then the translation");
   bp::def("build_contact_problem", &doBuild,
-          (bp::arg("sim"), bp::arg("data"), bp::arg("q"), bp::arg("v"), bp::arg("delta"), bp::arg("zeta")),
-          "fill data.J, A, b (eq. 27), drift, position_error and active at (q, v)");
+          (bp::arg("sim"), bp::arg("data"), bp::arg("q"), bp::arg("v"), bp::arg("delta"), bp::arg("zeta"),
+           bp::arg("implicit_pd_step") = 0.0),
+          "fill data.J, A, b (eq. 27), drift, position_error and active at (q, v); implicit_pd_step = h > 0: the "
+          "joint PD implicit over h, as a time step builds it (M's diagonal, the actuators' effort rows)");
   bp::def("rollout", &rollout,
           (bp::arg("sim"), bp::arg("data"), bp::arg("n_steps"), bp::arg("record_every") = 1,
            bp::arg("initial_contacts") = true),

@@ -184,6 +184,7 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
   freeDynamics(sim, sd, q, v, implicit_pd_step);
   delassusOperator(sim, sd);
   rightHandSide(sim, sd, v, delta, zeta);
+  if (implicit_pd_step > 0.0) addActuatorCompliance(sim, sd, implicit_pd_step);  // (effort rows, as step())
   watch.lap(sd.out.timings.delassus);
 }
 
