@@ -180,9 +180,8 @@ bool contactSupport(const pinocchio::Data& data, SystemWork& w) {
 
 }  // namespace
 
-void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
-                  const Eigen::VectorXd& v, double implicit_pd_step) {
-  (void)q;  // (the control torque at (q, v) is selectJointRows's)
+void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v, double implicit_pd_step) {
+  // (sd.out.tau: the control torque at (q, v), selectJointRows's)
   // The joints' generalized force: the control torque, but an actuator with an effort row acts through
   // its row; the implicit PD's -h kp v part (factorMass) and the viscous damping -d v.
   const std::vector<char>& effort_row = sd.work->effort_row;

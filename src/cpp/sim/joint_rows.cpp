@@ -17,14 +17,8 @@ namespace stages {
 
 namespace {
 
-pinocchio::JointIndex jointOfDof(const pinocchio::Model& model, int dof) {
-  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
-    if (dof >= model.idx_vs[j] && dof < model.idx_vs[j] + model.nvs[j]) return j;
-  return 0;
-}
-
 // A limit's sides in SimulatorWorkspace::forced_limit and limit_rows (bits per joint limit).
-constexpr char kForcedLower = 1, kForcedUpper = 2;
+constexpr char kLowerSide = 1, kUpperSide = 2;
 
 }  // namespace
 
@@ -42,13 +36,13 @@ void selectJointRows(const SimulatorModel& sim, SimulatorData& sd, const Eigen::
     const JointLimit& l = sim.joint_limits[i];
     const double qj = q[l.idx_q], vj = v[l.idx_v];
     char has = 0;  // (the limit rows this problem has, for finishJointRows's check)
-    if (std::isfinite(l.lower) && ((qj - l.lower) - h * std::max(0.0, -vj) < margin || (w.forced_limit[i] & kForcedLower))) {
+    if (std::isfinite(l.lower) && ((qj - l.lower) - h * std::max(0.0, -vj) < margin || (w.forced_limit[i] & kLowerSide))) {
       rows.push_back({JointRowKind::kLowerLimit, l.idx_v, static_cast<int>(i), qj - l.lower});
-      has |= kForcedLower;
+      has |= kLowerSide;
     }
-    if (std::isfinite(l.upper) && ((l.upper - qj) - h * std::max(0.0, vj) < margin || (w.forced_limit[i] & kForcedUpper))) {
+    if (std::isfinite(l.upper) && ((l.upper - qj) - h * std::max(0.0, vj) < margin || (w.forced_limit[i] & kUpperSide))) {
       rows.push_back({JointRowKind::kUpperLimit, l.idx_v, static_cast<int>(i), l.upper - qj});
-      has |= kForcedUpper;
+      has |= kUpperSide;
     }
     w.limit_rows[i] = has;
   }
@@ -77,8 +71,7 @@ void selectJointRows(const SimulatorModel& sim, SimulatorData& sd, const Eigen::
   w.control_torque = sd.out.tau;  // (freeDynamics turns sd.out.tau into the step's generalized force)
 }
 
-void addActuatorCompliance(const SimulatorModel& sim, SimulatorData& sd, double h) {
-  (void)sim;
+void addActuatorCompliance(SimulatorData& sd, double h) {
   const Eigen::Index first = sd.out.rows - static_cast<Eigen::Index>(sd.out.joint_rows.size());
   for (std::size_t k = 0; k < sd.out.joint_rows.size(); ++k) {
     const JointRow& r = sd.out.joint_rows[k];
@@ -141,7 +134,7 @@ double jointRowGuess(const SimulatorModel& sim, const SimulatorData& sd, std::si
 std::string jointRowName(const SimulatorModel& sim, const SimulatorData& sd, std::size_t k) {
   const JointRow& r = sd.out.joint_rows[k];
   const pinocchio::JointIndex j = r.limit >= 0 ? sim.joint_limits[static_cast<std::size_t>(r.limit)].joint
-                                               : jointOfDof(sim.model, r.dof);
+                                               : sim.dof_joint[static_cast<std::size_t>(r.dof)];
   const char* what = r.kind == JointRowKind::kLowerLimit   ? "lower limit"
                      : r.kind == JointRowKind::kUpperLimit ? "upper limit"
                      : r.kind == JointRowKind::kFriction   ? "dry friction"
@@ -185,12 +178,12 @@ bool finishJointRows(const SimulatorModel& sim, SimulatorData& sd, const Eigen::
   for (std::size_t i = 0; i < sim.joint_limits.size(); ++i) {
     const JointLimit& l = sim.joint_limits[i];
     const double qj = sd.q[l.idx_q];
-    if (!(w.limit_rows[i] & kForcedLower) && qj < l.lower) {
-      w.forced_limit[i] |= kForcedLower;
+    if (!(w.limit_rows[i] & kLowerSide) && qj < l.lower) {
+      w.forced_limit[i] |= kLowerSide;
       complete = false;
     }
-    if (!(w.limit_rows[i] & kForcedUpper) && qj > l.upper) {
-      w.forced_limit[i] |= kForcedUpper;
+    if (!(w.limit_rows[i] & kUpperSide) && qj > l.upper) {
+      w.forced_limit[i] |= kUpperSide;
       complete = false;
     }
   }

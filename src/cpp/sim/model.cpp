@@ -306,11 +306,13 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
                                 "(joint_friction = false)");
   dof_part.assign(static_cast<std::size_t>(model.nv), -1);
   dof_local.assign(static_cast<std::size_t>(model.nv), -1);
+  dof_joint.assign(static_cast<std::size_t>(model.nv), 0);
   for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
     for (int k = 0; k < model.nvs[j]; ++k) {
       const int s_j = joint_system[j];
       dof_part[static_cast<std::size_t>(model.idx_vs[j] + k)] = s_j;
       dof_local[static_cast<std::size_t>(model.idx_vs[j] + k)] = systems[s_j].model.idx_vs[joint_local[j]] + k;
+      dof_joint[static_cast<std::size_t>(model.idx_vs[j] + k)] = j;
     }
   for (const pinocchio::GeometryObject& object : geometry.geometryObjects) {
     const coal::NODE_TYPE type = object.geometry->getNodeType();

@@ -75,7 +75,7 @@ void selectJointRows(const SimulatorModel& sim, SimulatorData& sd, const Eigen::
 /// 4d. Time stepping with effort rows: each row's compliance 1 / (h K) on A's diagonal and c / (h K) in
 /// b, so that u = v+_j + P / (h K) - c / K: the row's impulse is h (c - K v+_j), the implicit PD's,
 /// strictly inside its bounds, and saturates at them (eq. 65 with C = [-h e, h e]).
-void addActuatorCompliance(const SimulatorModel& sim, SimulatorData& sd, double h);
+void addActuatorCompliance(SimulatorData& sd, double h);
 
 /// The constraint of joint row k of the problem (bounds scaled by `scale`: h for impulses) and its warm
 /// start from the last step's torques (clamped into the bounds).
@@ -97,10 +97,10 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
 
 /// 4a. M and nle (a robot's from stage 1's world-frame terms, compositeBackwardPass; a free
 /// body's M by crba, once), h kd + h^2 kp on M's diagonal when implicit_pd_step = h > 0, its
-/// factor M = U D U^T per part, the control torque tau and v_free = M^-1 (tau - nle).
-/// Throws when M is not positive definite.
-void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& q,
-                  const Eigen::VectorXd& v, double implicit_pd_step);
+/// factor M = U D U^T per part, the joints' generalized force tau (from selectJointRows's control
+/// torque at (q, v): the implicit PD's -h kp v, an effort row's actuator taken out, damping) and
+/// v_free = M^-1 (tau - nle). Throws when M is not positive definite.
+void freeDynamics(const SimulatorModel& sim, SimulatorData& sd, const Eigen::VectorXd& v, double implicit_pd_step);
 
 /// 4b. A = J M^-1 J^T (eq. 22) = sum over parts of W_s^T W_s, W_s = D_s^-1/2 U_s^-1 J_s^T:
 /// symmetric by construction; dense, or sparse (sd.out.sparse) when many parts share more than

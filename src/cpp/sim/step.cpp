@@ -126,9 +126,7 @@ void checkBlowUp(const SimulatorModel& sim, const SimulatorData& sd) {
                          ? ""
                          : " (ODE mode: is dt small enough for delta? see rk4StableStep)";
   if (speed > speed_limit) {
-    std::string joint = "?";
-    for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
-      if (k >= model.idx_vs[j] && k < model.idx_vs[j] + model.nvs[j]) joint = model.names[j];
+    const std::string& joint = model.names[sim.dof_joint[static_cast<std::size_t>(k)]];
     std::ostringstream os;
     os << "simulation diverged (blow-up) at t = " << sd.t << ": velocity coordinate " << k << " (joint '" << joint
        << "') reached " << speed << ", above the bound 10 (|v0| + |g| t) + 50 = " << speed_limit << hint;
@@ -181,10 +179,10 @@ void buildContactProblem(const SimulatorModel& sim, SimulatorData& sd, const Eig
   selectJointRows(sim, sd, q, v, implicit_pd_step);
   contactJacobians(sim, sd, v);
   watch.lap(sd.out.timings.kinematics);
-  freeDynamics(sim, sd, q, v, implicit_pd_step);
+  freeDynamics(sim, sd, v, implicit_pd_step);
   delassusOperator(sim, sd);
   rightHandSide(sim, sd, v, delta, zeta);
-  if (implicit_pd_step > 0.0) addActuatorCompliance(sim, sd, implicit_pd_step);  // (effort rows, as step())
+  if (implicit_pd_step > 0.0) addActuatorCompliance(sd, implicit_pd_step);  // (effort rows, as step())
   watch.lap(sd.out.timings.delassus);
 }
 
@@ -238,10 +236,10 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
         selectJointRows(sim, sd, sd.q, sd.v, pd_step);  // the control torque, the joints' rows
         contactJacobians(sim, sd, sd.v);                // J, drift J' v, Psi
         watch.lap(sd.out.timings.kinematics);
-        freeDynamics(sim, sd, sd.q, sd.v, pd_step);                        // M = U D U^T, M^-1 (tau - nle)
+        freeDynamics(sim, sd, sd.v, pd_step);                              // M = U D U^T, M^-1 (tau - nle)
         delassusOperator(sim, sd);                                         // A = J M^-1 J^T
         rightHandSide(sim, sd, sd.v, h, 0.5, /*tangential_drift=*/false);  // b (eq. 27)
-        if (pd_step > 0.0) addActuatorCompliance(sim, sd, h);              // effort rows
+        if (pd_step > 0.0) addActuatorCompliance(sd, h);                   // effort rows
         watch.lap(sd.out.timings.delassus);
         solveContacts(sim, sd, h);  // A P - h b in -N(P), by the formulation
         watch.lap(sd.out.timings.solve);

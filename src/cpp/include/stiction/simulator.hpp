@@ -267,6 +267,7 @@ class SimulatorModel {
   Eigen::VectorXd joint_friction, effort_limit, joint_damping;
   std::vector<int> friction_dofs, effort_dofs;  ///< the coordinates with friction, with an effort limit
   std::vector<int> dof_part, dof_local;  ///< per world velocity coordinate: its part and local coordinate
+  std::vector<pinocchio::JointIndex> dof_joint;  ///< per world velocity coordinate: its joint
 };
 
 /// Microseconds spent per phase in the last step (summed over RHS evaluations in ODE modes).
