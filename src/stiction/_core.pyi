@@ -557,8 +557,8 @@ def residual(problem: ContactProblem, lam: numpy.typing.ArrayLike) -> float:
 def rk4_stable_step(delta: float, zeta: float = ...) -> float:
     """the largest dt SimulatorModel accepts in rk4 mode: 0.75 x RK4's stability limit on eq. 64"""
 
-def rollout(sim: SimulatorModel, data: SimulatorData, n_steps: int, record_every: int = ..., initial_contacts: bool = ...) -> dict:
-    """n steps in C++ (the GIL released); returns a dict of arrays (t, q, v, lam, gaps, states, residual, ...); initial_contacts=False leaves record 0's contact fields as the last step wrote them (for a caller that drops record 0) instead of measuring them at the starting state"""
+def rollout(sim: SimulatorModel, data: SimulatorData, n_steps: int, record_every: int = ..., initial_contacts: bool = ..., before_step: Any = ...) -> dict:
+    """n steps in C++ (the GIL released); returns a dict of arrays (t, q, v, lam, gaps, states, residual, ...); initial_contacts=False leaves record 0's contact fields as the last step wrote them (for a caller that drops record 0) instead of measuring them at the starting state; before_step: a callable run with no argument before each step (the GIL then held; what it raises stops the rollout and propagates)"""
 
 def solver_names() -> list:
     ...

@@ -148,10 +148,11 @@ void checkCounts(int n_steps, int every) {
 // the final state even when n_steps is not a multiple of `every` (else the trajectory would end
 // up to every - 1 steps early, and a summary's duration with it).
 void run(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out,
-         bool initial_contacts = true) {
+         bool initial_contacts = true, const std::function<void()>& before_step = nullptr) {
   if (initial_contacts) contactsAtState(sim, d);
   out.record(sim, d, /*initial=*/true);
   for (int k = 1; k <= n_steps; ++k) {
+    if (before_step) before_step();
     step(sim, d);
     if (k % every == 0 || k == n_steps) out.record(sim, d);
   }
@@ -160,13 +161,13 @@ void run(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Re
 }  // namespace
 
 void rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out,
-             bool initial_contacts) {
+             bool initial_contacts, const std::function<void()>& before_step) {
   checkCounts(n_steps, every);
   if (!out.fits(sim, n_steps, every))
     out.allocate(sim, n_steps, every);
   else if (out.records != 0)
     out.clear();  // (laid out for these counts but used: NaN again, from its first row)
-  run(sim, d, n_steps, every, out, initial_contacts);
+  run(sim, d, n_steps, every, out, initial_contacts, before_step);
 }
 
 void batchRollout(const std::vector<BatchItem>& items, int n_steps, int every, int threads,

@@ -3,6 +3,7 @@
 // SimulatorModels are only read, so several simulations may share one).
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -72,9 +73,12 @@ struct Recording {
 /// step that throws propagates (the recording keeps what came before it).
 /// `initial_contacts` false: record 0's contact fields are left as the last step wrote them instead
 /// of measured at the starting state (contactsAtState: kinematics and detection once more), for a
-/// caller that drops record 0, such as a Python callback loop stepping one chunk at a time.
+/// caller that drops record 0.
+/// `before_step` (optional): called before each step, after the previous step's record: a
+/// controller writing d.control (its writes act on that step). What it throws stops the rollout
+/// and propagates, `d` left after the steps done so far and `out` with their records.
 void rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every, Recording& out,
-             bool initial_contacts = true);
+             bool initial_contacts = true, const std::function<void()>& before_step = nullptr);
 
 /// One simulation of a batch: its model, its data (state in, state out) and what it records.
 struct BatchItem {
