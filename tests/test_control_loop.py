@@ -199,3 +199,37 @@ def test_the_adaptive_mode_with_a_callback_is_the_python_loop():
         q.append(b.data.q)
     np.testing.assert_array_equal(traj.q, np.array(q))
     assert traj.v[-1, 0] > 0.0  # the push (> mu m g) slides it
+
+
+def test_the_step_function_takes_its_arguments_by_position_or_name_and_names_a_wrong_one():
+    """_core.step is a C function (no Boost.Python dispatch): its arguments as before, by position or
+    name; a missing, extra, repeated or unknown one, or an object of the wrong type, is a TypeError
+    naming it. Two steps by name equal two by position bit for bit."""
+    a, b = Simulator("cube-slide"), Simulator("cube-slide")
+    _core.step(a.model, a.data)
+    _core.step(sim=a.model, data=a.data)
+    _core.step(b.model, b.data)
+    _core.step(b.model, data=b.data)
+    np.testing.assert_array_equal(a.data.q, b.data.q)
+    assert a.data.t == pytest.approx(2 * a.dt)
+    for args, kwargs, message in [
+        ((a.model,), {}, "missing argument 'data'"), ((), {"data": a.data}, "missing argument 'sim'"),
+        ((a.model, a.data, 1), {}, r"takes 2 arguments \(sim, data\), 3 given"),
+        ((a.model, a.data), {"sim": a.model}, "multiple values for argument 'sim'"),
+        ((a.model, a.data), {"dt": 1e-3}, "unexpected keyword argument 'dt'"),
+        ((a.data, a.data), {}, "step: sim must be a stiction.SimulatorModel, got"),
+        ((a.model, a.model), {}, "step: data must be a stiction.SimulatorData, got"),
+    ]:
+        with pytest.raises(TypeError, match=message):
+            _core.step(*args, **kwargs)
+    assert a.data.t == pytest.approx(2 * a.dt)  # nothing stepped
+
+
+def test_a_control_attribute_cannot_be_deleted_and_reads_the_same_memory_each_time():
+    sim = Simulator("cube-slide")
+    with pytest.raises(AttributeError, match="SimulatorData.tau_ff cannot be deleted"):
+        del sim.data.tau_ff
+    first, second = sim.data.q_target, sim.data.q_target
+    assert first is not second and np.shares_memory(first, second)  # a new view each read, one vector
+    assert first.dtype == np.float64 and first.shape == (sim.model.nq,) and first.flags.c_contiguous
+    assert first.base is sim.data  # the view holds the data alive

@@ -107,6 +107,9 @@ def generate(module=None) -> str:
                         body += ["    @property", f"    def {attr}(self) -> {tp}: ...", ""]
                     else:
                         body.append(f"    {attr}: {tp}")
+                elif inspect.isgetsetdescriptor(value):
+                    # (C-level attributes: SimulatorData's control inputs, writable numpy views)
+                    body.append(f"    {attr}: numpy.ndarray")
                 elif isinstance(value, staticmethod) or type(value).__name__ == "staticmethod":
                     fn = getattr(obj, attr)
                     sigs = _signatures(fn.__doc__, own, drop_self=False, owner=name)

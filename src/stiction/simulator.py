@@ -321,7 +321,8 @@ class Simulator:
             self.data.t = _positive("t", t, allow_zero=True)
 
     def step(self) -> None:
-        _core.step(self.model, self.data)
+        """One step (time stepping: dt; the ODE modes: one step of their integrator)."""
+        _core.step(self.model, self._data)
 
     def rollout(self, duration: float | None = None, record_every: int = 1,
                 callback: Callable[["Simulator"], None] | None = None) -> Trajectory:
