@@ -26,11 +26,12 @@ MuJoCo 4.0 (optional, the ``bench`` extra; without it those rows are left out)
 
 The control u is the scene's own (tau_ff = 0 for stiction, the PD targets for MuJoCo's position
 actuators), so every way simulates the same standing robot: the stiction ways end in the same state
-bit for bit (checked). Then the cost of one control write alone (``timeit``, per write): stiction's
+bit for bit (checked). Then the cost of one control write alone (``timeit`` of the statement): stiction's
 ``sim.data.tau_ff[:] = u``, ``sim.data.tau_ff = u``, and its parts (``sim.data``, the view
 ``sim.data.tau_ff``), MuJoCo's ``d.ctrl[:] = u``.
 
-Times are wall clock per step (CPU time beside it: the machine may be shared); ratios and overheads
+Times are wall clock per step, and the process's CPU time beside it (on a shared machine the wall
+clock also counts the time other jobs held the core: then read the CPU column); ratios and overheads
 are paired within a repetition, then the median taken. Output: Markdown on stdout (and ``--out``),
 or JSON with ``--json``; progress on stderr.
 """
@@ -194,21 +195,23 @@ class Bench:
 
     # ---- one control write
     def writes(self) -> dict:
-        """µs per operation, each the best of 3 runs of WRITES (timeit)."""
-        sim, u = self._fresh(), self.u
-        view = sim.data.tau_ff
-        ops = {
-            "sim.data.tau_ff[:] = u": lambda: sim.data.tau_ff.__setitem__(slice(None), u),
-            "sim.data.tau_ff = u": lambda: setattr(sim.data, "tau_ff", u),
-            "  part: sim.data": lambda: sim.data,
-            "  part: sim.data.tau_ff (the view)": lambda: sim.data.tau_ff,
-            "  part: view[:] = u (a view kept)": lambda: view.__setitem__(slice(None), u),
-            "  (an empty lambda: the timing's own cost)": lambda: None,
+        """µs per statement as a controller writes it (timeit of the source text: Python's own bytecode
+        for `x[:] = u`), each the best of 3 runs of WRITES."""
+        sim = self._fresh()
+        names = {"sim": sim, "u": self.u, "view": sim.data.tau_ff}
+        statements = {
+            "sim.data.tau_ff[:] = u": "sim.data.tau_ff[:] = u",
+            "sim.data.tau_ff = u": "sim.data.tau_ff = u",
+            "  part: sim.data": "sim.data",
+            "  part: sim.data.tau_ff (the view)": "sim.data.tau_ff",
+            "  part: view[:] = u (a view kept)": "view[:] = u",
+            "  (pass: the timing's own cost)": "pass",
         }
         if self.mj is not None:
-            d, mu = self.mj_data, self.mj_u
-            ops["MuJoCo d.ctrl[:] = u"] = lambda: d.ctrl.__setitem__(slice(None), mu)
-        return {k: min(timeit.repeat(f, number=WRITES, repeat=3)) / WRITES * 1e6 for k, f in ops.items()}
+            names.update(d=self.mj_data, mu=self.mj_u)
+            statements["MuJoCo d.ctrl[:] = u"] = "d.ctrl[:] = mu"
+        return {k: min(timeit.repeat(code, number=WRITES, repeat=3, globals=names)) / WRITES * 1e6
+                for k, code in statements.items()}
 
 
 def run(scene: str, steps: int, repeats: int) -> dict:
@@ -237,9 +240,12 @@ def run(scene: str, steps: int, repeats: int) -> dict:
         row = {"way": name, "us_per_step": statistics.median(wall[name]), "min": min(wall[name]),
                "max": max(wall[name]), "cpu_us_per_step": statistics.median(cpu[name]),
                "over_rollout_us": statistics.median(over), "over_rollout_cpu_us": statistics.median(over_cpu),
-               "vs_rollout": statistics.median(a / b for a, b in zip(wall[name], wall["rollout"]))}
+               "vs_rollout": statistics.median(a / b for a, b in zip(wall[name], wall["rollout"])),
+               "vs_rollout_cpu": statistics.median(a / b for a, b in zip(cpu[name], cpu["rollout"]))}
         if mj_loop is not None:
             row["vs_mujoco_loop"] = statistics.median(a / b for a, b in zip(wall[name], mj_loop))
+            row["vs_mujoco_loop_cpu"] = statistics.median(
+                a / b for a, b in zip(cpu[name], cpu["MuJoCo mj_step loop"]))
         rows.append(row)
     import pinocchio as pin  # noqa: PLC0415
 
@@ -260,14 +266,14 @@ def markdown(res: dict) -> str:
         f"interleaved; medians. {sweep.stamp_text(st)}.",
         "",
         "| way | µs / step (wall) | min – max | CPU µs / step | beyond the C++ rollout, µs / step (wall; CPU) "
-        "| / C++ rollout | / MuJoCo's Python loop |",
+        "| / C++ rollout (wall; CPU) | / MuJoCo's Python loop (wall; CPU) |",
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for r in res["rows"]:
-        vs_mj = f"{r['vs_mujoco_loop']:.2f}" if "vs_mujoco_loop" in r else "—"
+        vs_mj = f"{r['vs_mujoco_loop']:.2f}; {r['vs_mujoco_loop_cpu']:.2f}" if "vs_mujoco_loop" in r else "—"
         lines.append(f"| {r['way']} | {r['us_per_step']:.2f} | {r['min']:.2f} – {r['max']:.2f} | "
                      f"{r['cpu_us_per_step']:.2f} | {r['over_rollout_us']:+.2f}; {r['over_rollout_cpu_us']:+.2f} | "
-                     f"{r['vs_rollout']:.2f} | {vs_mj} |")
+                     f"{r['vs_rollout']:.2f}; {r['vs_rollout_cpu']:.2f} | {vs_mj} |")
     lines += [
         "",
         f"The C++ step's own timer (inside the rollout, median over steps): {res['step_timer_us']:.2f} µs. "
