@@ -446,7 +446,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_formulations)
 
-    p = sub.add_parser("bench", help="benchmarks: scaling, work-precision, profiles, stability, all")
+    p = sub.add_parser("bench", help="benchmarks: scaling, work-precision, profiles, stability, creep, all")
     bench_sub = p.add_subparsers(dest="bench", required=True, parser_class=_Parser, metavar="BENCH")
     from .bench import available_benches, load_bench, sweep
 
