@@ -377,6 +377,9 @@ def summarize(rows: list[dict]) -> dict:
 
 
 FLOOR = 1e-17  # m: a slip of 0 is drawn here on the log axis
+# one colour per method (METHODS order): the formulations, then MuJoCo's three settings (dashed)
+COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+          "#000000", "#17becf", "#bcbd22")
 
 
 def plot(rows: list[dict], out_dir: Path, stamp: dict) -> list[Path]:
@@ -401,8 +404,9 @@ def plot(rows: list[dict], out_dir: Path, stamp: dict) -> list[Path]:
     for ax, scene in zip(axes[0], scenes):
         mine = [r for r in rows if r["scene"] == scene]
         methods = [m for m in METHODS if any(r["method"] == m for r in mine)]
-        for i, m in enumerate(methods):
-            color = plt.get_cmap("tab10")(i % 10)
+        for m in methods:
+            i = METHODS.index(m)
+            color = COLORS[i % len(COLORS)]
             style = "--" if m in MUJOCO_METHODS else "-"
             good = sorted((r for r in mine if r["method"] == m and not _bool(r["failed"]) and _finite(r["slip"])),
                           key=lambda r: float(r["margin"]))
@@ -417,7 +421,7 @@ def plot(rows: list[dict], out_dir: Path, stamp: dict) -> list[Path]:
         ax.set_xscale("log")
         margins = sorted({float(r["margin"]) for r in mine})
         ax.set_xticks(margins)
-        ax.set_xticklabels([f"{m:g}" for m in margins], fontsize=7)
+        ax.set_xticklabels([f"{m:g}" for m in margins], fontsize=7, rotation=90)
         ax.minorticks_off()
         ax.set_ylim(FLOOR / 3, top)
         duration = max(float(r["duration"]) for r in mine)
