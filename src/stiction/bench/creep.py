@@ -52,7 +52,8 @@ shows it against the goal (exact <= 1e-9 m at every margin > 1).
 **Rows** (CSV columns = ``FIELDS``): ``scene``, ``method``, ``margin``, ``slip`` (m, at the end;
 None when the run stopped), ``seconds_per_simulated_second``, ``failed``, ``failure``;
 ``creep_rate`` (m/s over the second half); ``grip`` (pinch only: one finger's normal force in N,
-the sum over its pads at t = T/10; stiction's rigid pads hold the nominal kp (q_target - q0)),
+the sum over its pads at t = GRIP_TIME = 0.05 s, when MuJoCo's soft pads have settled and nothing
+has fallen yet; stiction's rigid pads hold the nominal kp (q_target - q0)),
 ``effective_margin`` (pinch: margin x grip / nominal grip; the other scenes: the margin, their
 normal force being m g cos theta whatever the contact model); ``mu`` (the coefficient run), ``mu_needed``,
 ``duration`` (s simulated), ``dt``, ``measured_seconds_per_simulated_second``, ``time_limit``.
@@ -88,6 +89,11 @@ DT = 1e-3
 TOLERANCE = 1e-10  # stiction's contact solver and MuJoCo's (apply_options)
 TIME_LIMIT, QUICK_TIME_LIMIT = 60.0, 20.0  # wall s per case
 CHUNKS = 10  # stiction rolls out in chunks: the time limit is checked between them
+GRIP_TIME = 0.05  # s: when the pinch's grip is measured (MuJoCo's soft pads have settled, nothing fell yet)
+
+
+def _grip_step(n: int, dt: float) -> int:
+    return max(1, min(n, round(GRIP_TIME / dt)))
 GOAL = 1e-9  # m: the exact formulation's slip at every margin > 1
 
 
@@ -170,7 +176,9 @@ def _run_stiction(case: dict, sc) -> dict:
     i = _box_joint(sc)
     pads = [k for k, c in enumerate(sc.contacts) if "pad" in c.name] if case["scene"] == "pinch" else []
     n = int(round(duration / dt))
-    bounds = [round(n * k / CHUNKS) for k in range(CHUNKS + 1)]
+    regular = [round(n * k / CHUNKS) for k in range(CHUNKS + 1)]
+    grip_step = _grip_step(n, dt)
+    bounds = sorted(set(regular) | ({grip_step} if pads else set()))
     positions = [np.array(sim.data.q[i:i + 3])]
     for a, b in zip(bounds[:-1], bounds[1:]):
         if b == a:
@@ -186,8 +194,9 @@ def _run_stiction(case: dict, sc) -> dict:
         if not (np.isfinite(tr.q).all() and np.isfinite(tr.v).all()):
             out["failure"] = "non-finite"
             return out
-        positions.append(np.array(tr.q[-1, i:i + 3]))
-        if len(positions) == 2 and pads:  # the grip at T / CHUNKS: each finger's pads' normal forces
+        if b in regular:
+            positions.append(np.array(tr.q[-1, i:i + 3]))
+        if pads and b == grip_step:  # the grip: each finger's pads' normal forces
             out["grip"] = float(np.nansum(tr.lam[-1, pads, 2])) / 2.0
         if out["wall"] > case["time_limit"] and b < n:
             out["failure"] = f"time-limit: stopped after {b} of {n} steps"
@@ -246,20 +255,21 @@ def _run_mujoco(case: dict, name: str, sc, mu: float) -> dict:
         return out
     bid = model.body(body).id
     positions = []
-    for j, k in enumerate(round(n * j / CHUNKS) for j in range(CHUNKS + 1)):
+    for k in [round(n * j / CHUNKS) for j in range(CHUNKS + 1)]:
         mujoco.mj_setState(model, data, initial if k == 0 else states[0, k - 1], physics)
         mujoco.mj_kinematics(model, data)
         positions.append(np.array(data.xpos[bid]))
-        if j == 1 and name == "pinch":  # the grip at T / CHUNKS: normal forces of the pads (finger geoms)
-            mujoco.mj_forward(model, data)
-            fingers = {model.body(f"{side}_finger").id for side in ("left", "right")}
-            f6, total = np.zeros(6), 0.0
-            for c in range(data.ncon):
-                con = data.contact[c]
-                if {int(model.geom_bodyid[con.geom1]), int(model.geom_bodyid[con.geom2])} & fingers:
-                    mujoco.mj_contactForce(model, data, c, f6)
-                    total += float(f6[0])
-            out["grip"] = total / 2.0
+    if name == "pinch":  # the grip: the normal forces of the pads (the finger geoms' contacts)
+        mujoco.mj_setState(model, data, states[0, _grip_step(n, case["dt"]) - 1], physics)
+        mujoco.mj_forward(model, data)
+        fingers = {model.body(f"{side}_finger").id for side in ("left", "right")}
+        f6, total = np.zeros(6), 0.0
+        for c in range(data.ncon):
+            con = data.contact[c]
+            if {int(model.geom_bodyid[con.geom1]), int(model.geom_bodyid[con.geom2])} & fingers:
+                mujoco.mj_contactForce(model, data, c, f6)
+                total += float(f6[0])
+        out["grip"] = total / 2.0
     out["positions"] = np.array(positions)
     return out
 
