@@ -263,3 +263,17 @@ def test_callback_batch_and_saved_trajectories_keep_sensors(tmp_path):
     assert legacy.contact_force is None and legacy.frame_names is None and legacy.accelerometer is None
     with pytest.raises(ValueError, match="saved before sensors"):
         legacy.contact_force_of("FL_FOOT")
+
+
+@pytest.mark.parametrize("mode", ["timestep", "rk4"])
+def test_accelerometer_times_mass_is_the_contact_force(mode):
+    """Newton on a single rigid body (the cube, its centre of mass at the IMU's origin) sliding down
+    the incline: m times the proper acceleration is the total contact force, in the body frame (rk4: its
+    steady slide, where the last right-hand side's force is the whole step's)."""
+    sim = Simulator("cube-incline-slip", mode=mode, dt=1e-3 if mode == "timestep" else 1e-4)
+    traj = sim.rollout(0.3)
+    mass = pin.computeTotalMass(sim.scene.model)
+    R0 = np.array([pin.Quaternion(q[3:7]).matrix() for q in traj.q[:-1]])
+    expected = np.einsum("kba,kb->ka", R0, traj.frame_force_of("cube")[1:]) / mass
+    assert (traj.frame_states[len(traj.t) // 2:] == 2).all()  # sliding
+    np.testing.assert_allclose(traj.accelerometer[1:], expected, rtol=0, atol=1e-9 * G)

@@ -47,7 +47,8 @@ def _states(recorded: np.ndarray) -> np.ndarray:
 class Trajectory:
     """A recorded rollout. Shapes: N records, nc candidate contacts.
 
-    t (N,), q (N, nq), v (N, nv); lam (N, nc, 3) contact forces (t1, t2, n) in N;
+    t (N,), q (N, nq), v (N, nv); lam (N, nc, 3) contact forces (t1, t2, n) in N (time stepping:
+    the step's impulse / h, eq. 70), each in its contact's frame (world: contact_force);
     contact_velocity (N, nc, 3) J v after each step; gaps (N, nc) signed distances (of the
     configuration the step's contact problem was built at: the step's start in time stepping);
     states (N, nc) 0 open / 1 stick / 2 slip / 3 closed; residual (N,) the largest solver
