@@ -61,7 +61,7 @@ def _expected_world_forces(sim: Simulator, q_start: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("name, yaw", [("solo12-stand", 0.7), ("solo12-on-board", 0.7), ("pinch", 0.0),
-                                       ("cube-incline-slip", 0.3)])
+                                       ("cube-incline-slip", 0.3), ("planar-box-slide", 0.0)])
 def test_world_force_is_the_impulse_over_h_in_the_contact_frame(name, yaw):
     """contact_force = (t1 t2 n) P / h, the frame from the half-space (a body's face: turned by
     Pinocchio's placement of its frame at the step's start), live after each step and in the

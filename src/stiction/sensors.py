@@ -99,13 +99,15 @@ def frame_totals(incidence: np.ndarray, contact_force: np.ndarray, states: np.nd
     world force (..., nf, 3) (NaN where a contact's force is: no step behind it) and the frame's state
     (..., nf) int8: 2 if a contact of it slips, else 1 if one sticks, else 3 if one is closed, else 0
     (open), and NO_STATE where its contacts' states are all NO_STATE."""
-    S = np.asarray(incidence, dtype=float)
-    force = np.einsum("fc,...cx->...fx", S, contact_force)
-    touches = incidence != 0
     lead = states.shape[:-1]
-    out = np.zeros(lead + (len(S),), dtype=np.int8)
-    for f in range(len(S)):
-        s = states[..., touches[f]]
+    nf = len(incidence)
+    force = np.zeros(lead + (nf, 3))
+    out = np.zeros(lead + (nf,), dtype=np.int8)
+    for f in range(nf):  # (frame by frame over its few contacts: a dense S product is nf x nc per record)
+        touching = np.flatnonzero(incidence[f])
+        force[..., f, :] = np.einsum("c,...cx->...x", incidence[f, touching].astype(float),
+                                     contact_force[..., touching, :])
+        s = states[..., touching]
         state = np.where((s == 2).any(-1), 2, np.where((s == 1).any(-1), 1, np.where((s == 3).any(-1), 3, 0)))
         if s.shape[-1]:
             state = np.where((s == NO_STATE).all(-1), NO_STATE, state)
