@@ -228,15 +228,14 @@ def test_live_sensors_and_names():
 
 
 def test_fixed_base_has_no_imu():
-    sim = Simulator("ur5-push-box")
-    model = sim.scene.model
+    """A fixed-base arm (no free flyer): no IMU, in the trajectory and live; its tool's contact still
+    has its frame total."""
+    sim = Simulator("ur5-push-wall")
     traj = sim.rollout(0.01)
-    root_free = [j for j in range(1, model.njoints)
-                 if model.parents[j] == 0 and model.joints[j].shortname() == "JointModelFreeFlyer"]
-    if root_free:  # (the box is a free body: its IMU)
-        assert traj.accelerometer is not None
-    else:
-        assert traj.accelerometer is None and traj.gyro is None
+    assert traj.accelerometer is None and traj.gyro is None
+    live = sim.sensors()
+    assert live.accelerometer is None and live.gyro is None
+    assert traj.frame_names == ["tool0"] and traj.frame_force.shape == (len(traj.t), 1, 3)
 
 
 def test_callback_batch_and_saved_trajectories_keep_sensors(tmp_path):
