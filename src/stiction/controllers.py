@@ -119,6 +119,8 @@ class TrotController(Controller):
         "attitude_gain": (0.15, "stance foot lowering per rad of pitch or roll, m/rad"),
         "stance_stiffness": (0.5, "fraction of the way from a stance foot's position to its sweep that its "
                              "horizontal target is set (1: the sweep itself; ramps to 0 before lift-off)"),
+        "liftoff_softness": (0.2, "the lowest fraction of the scene's kp, kd a stance leg softens to before lift-off "
+                             "(1: never)"),
         "velocity_filter": (0.05, "time constant of the base velocity filter, s"),
         "feedforward": (1.0, "1: stance feet carry the weight by feed-forward torques, 0: PD only"),
     }
@@ -231,6 +233,7 @@ class TrotController(Controller):
         t_stance, t_swing = duty * period, (1.0 - duty) * period
         targets = self.nominal.copy()
         load = np.ones(4)  # each foot's share of the weight (relative)
+        softness = np.ones(4)  # each leg's PD gains relative to the scene's
         for k in range(4):
             if t < p["start"]:  # standing on the initial posture
                 self.in_stance[k], self.stance_from[k], self.stance_t0[k] = True, self.nominal[k], t
@@ -250,6 +253,9 @@ class TrotController(Controller):
                 # the weight moves onto a foot after touchdown and off it before lift-off
                 ramp = max(p["load_ramp"], 1e-9)
                 load[k] = min(1.0, (phi + 1e-9) / ramp, (duty - phi) / ramp)
+                # before lift-off the leg softens with its load: a joint PD's force is not along its error
+                # (K = J^-T kp J^-1), so a stiff unloading leg pushes sideways as its normal force vanishes
+                softness[k] = max(p["liftoff_softness"], min(1.0, (duty - phi) / ramp))
             else:
                 s = (phi - duty) / (1.0 - duty)
                 # swing: a cubic Hermite in s from the lift-off point to the landing point, leaving the ground
@@ -290,6 +296,10 @@ class TrotController(Controller):
         else:
             v_target[self.iv.ravel()] = 0.0
         self.previous_targets = joints
+        kp, kd = control.kp, control.kd
+        for k in range(4):
+            kp[self.iv[k]] = self.scene.kp[self.iv[k]] * softness[k]
+            kd[self.iv[k]] = self.scene.kd[self.iv[k]] * softness[k]
         tau = control.tau_ff
         tau[:] = 0.0
         if p["feedforward"] != 0.0 and load.sum() > 0.0:
