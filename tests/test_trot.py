@@ -70,9 +70,11 @@ def test_stance_feet_stick_between_touchdown_and_unloading(runs):
     speed = np.linalg.norm(traj.contact_velocity[..., :2], axis=-1)
     assert stick.sum() > 1000
     assert speed[stick].max() <= 1e-9
-    # slip happens only where the foot unloads (a fraction of the stance steps)
+    # slip is rare: the steps right after a touchdown whose impact left the foot sliding, and the last
+    # steps before lift-off as the normal force vanishes (docs/controllers.md: not yet <= 1e-9 m)
     slipping = traj.states == 2
-    assert slipping.sum() < 0.05 * (stick.sum() + slipping.sum())
+    assert slipping.sum() < 0.01 * (stick.sum() + slipping.sum())
+    assert s["max_stance_slip"] < 2e-4
     # the summary's measure against this file's own sum over each stance
     assert s["max_stance_slip"] == pytest.approx(max(_stance_slip_reference(traj)), rel=1e-12)
 

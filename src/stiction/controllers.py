@@ -106,9 +106,9 @@ class TrotController(Controller):
 
     PARAMETERS = {
         "speed": (0.3, "forward speed commanded, m/s (along the base's initial heading)"),
-        "period": (0.36, "gait cycle, s"),
+        "period": (0.3, "gait cycle, s"),
         "duty": (0.55, "fraction of the cycle a foot is in stance (> 0.5: all four feet down around each switch)"),
-        "load_ramp": (0.1, "fraction of the cycle over which the weight moves onto a foot after touchdown and off "
+        "load_ramp": (0.05, "fraction of the cycle over which the weight moves onto a foot after touchdown and off "
                       "it before lift-off"),
         "lift": (0.04, "swing foot lift, m"),
         "lift_shape": (2.0, "the swing height is lift sin(pi s)^lift_shape (s: the swing's progress; 1: the foot leaves "
@@ -121,6 +121,8 @@ class TrotController(Controller):
                              "horizontal target is set (1: the sweep itself; ramps to 0 before lift-off)"),
         "liftoff_softness": (0.2, "the lowest fraction of the scene's kp, kd a stance leg softens to before lift-off "
                              "(1: never)"),
+        "swing_stiffness": (2.0, "a swing leg's PD gains relative to the scene's kp, kd (stiffer: it tracks its "
+                            "path and touches down at the ground's speed)"),
         "velocity_filter": (0.05, "time constant of the base velocity filter, s"),
         "feedforward": (1.0, "1: stance feet carry the weight by feed-forward torques, 0: PD only"),
     }
@@ -269,6 +271,8 @@ class TrotController(Controller):
                 targets[k][0] += h11 * (-v_cmd * t_swing)
                 targets[k][2] = self.nominal[k][2] + p["lift"] * math.sin(math.pi * s) ** p["lift_shape"]
                 load[k] = 0.0
+                softness[k] = p["swing_stiffness"] * max(p["liftoff_softness"],
+                                                         min(1.0, (phi - duty) / max(p["load_ramp"], 1e-9)))
         # stance feet: only a part of the way from where they are to their sweep (a softer horizontal
         # spring: the friction the stance needs stays well inside the cone), none of it at lift-off
         pin.forwardKinematics(self.model, self.data, q)
@@ -303,12 +307,15 @@ class TrotController(Controller):
         tau = control.tau_ff
         tau[:] = 0.0
         if p["feedforward"] != 0.0 and load.sum() > 0.0:
+            # static equilibrium (as control.gravity_feedforward): tau = g(q) - J^T lambda, the legs' own
+            # weight and the stance feet's shares of the robot's (vertical forces: no sideways push)
+            tau[6:] = p["feedforward"] * pin.computeGeneralizedGravity(self.model, self.data, q)[6:]
             pin.computeJointJacobians(self.model, self.data, q)
             pin.updateFramePlacements(self.model, self.data)
             shares = p["feedforward"] * self.weight * load / load.sum()
             for k in np.flatnonzero(load > 0.0):
                 J = pin.getFrameJacobian(self.model, self.data, self.feet[k], pin.LOCAL_WORLD_ALIGNED)
-                tau[self.iv[k]] = -J[2, self.iv[k]] * shares[k]  # -J^T (0, 0, share)
+                tau[self.iv[k]] -= J[2, self.iv[k]] * shares[k]  # -J^T (0, 0, share)
 
     def _swing_end(self, k: int, v_cmd: float, t_stance: float) -> np.ndarray:
         """Raibert's landing point: half a stance's travel ahead of the nominal foot, plus a correction
