@@ -236,6 +236,7 @@ class TrotController(Controller):
         targets = self.nominal.copy()
         load = np.ones(4)  # each foot's share of the weight (relative)
         softness = np.ones(4)  # each leg's PD gains relative to the scene's
+        unload = np.ones(4)  # 1 until the weight starts moving off a stance foot, then down to 0 at lift-off
         for k in range(4):
             if t < p["start"]:  # standing on the initial posture
                 self.in_stance[k], self.stance_from[k], self.stance_t0[k] = True, self.nominal[k], t
@@ -255,6 +256,7 @@ class TrotController(Controller):
                 # the weight moves onto a foot after touchdown and off it before lift-off
                 ramp = max(p["load_ramp"], 1e-9)
                 load[k] = min(1.0, (phi + 1e-9) / ramp, (duty - phi) / ramp)
+                unload[k] = min(1.0, (duty - phi) / ramp)
                 # before lift-off the leg softens with its load: a joint PD's force is not along its error
                 # (K = J^-T kp J^-1), so a stiff unloading leg pushes sideways as its normal force vanishes
                 softness[k] = max(p["liftoff_softness"], min(1.0, (duty - phi) / ramp))
@@ -274,14 +276,15 @@ class TrotController(Controller):
                 softness[k] = p["swing_stiffness"] * max(p["liftoff_softness"],
                                                          min(1.0, (phi - duty) / max(p["load_ramp"], 1e-9)))
         # stance feet: only a part of the way from where they are to their sweep (a softer horizontal
-        # spring: the friction the stance needs stays well inside the cone), none of it at lift-off
+        # spring: the friction the stance needs stays well inside the cone), none of it at lift-off (but
+        # all of it from touchdown on: a target following the foot would not resist its sliding)
         pin.forwardKinematics(self.model, self.data, q)
         pin.updateFramePlacements(self.model, self.data)
         base = self.data.oMi[1]
         for k in range(4):
             if self.in_stance[k] and t >= p["start"]:
                 actual = base.actInv(self.data.oMf[self.feet[k]].translation)
-                gain = p["stance_stiffness"] * load[k]
+                gain = p["stance_stiffness"] * unload[k]
                 targets[k][:2] = actual[:2] + gain * (targets[k][:2] - actual[:2])
         self.last_targets = targets.copy()  # (where a swing starts: the target the stance ended on)
         # level the base: legs extend where the base dips (pitch > 0 is nose down: the front ones; roll > 0
