@@ -74,7 +74,7 @@ def test_stance_feet_stick_between_touchdown_and_unloading(runs):
     # steps before lift-off as the normal force vanishes (docs/controllers.md: not yet <= 1e-9 m)
     slipping = traj.states == 2
     assert slipping.sum() < 0.01 * (stick.sum() + slipping.sum())
-    assert s["max_stance_slip"] < 2e-4
+    assert s["max_stance_slip"] < 5e-5  # 2.5e-5 m measured (a hind foot)
     # the summary's measure against this file's own sum over each stance
     assert s["max_stance_slip"] == pytest.approx(max(_stance_slip_reference(traj)), rel=1e-12)
 
@@ -103,7 +103,7 @@ def _stance_slip_reference(traj):
 def test_on_ice_the_feet_slip_and_the_robot_walks_less(runs):
     _, traj, ice = runs["solo12-trot-ice"]
     _, _, dry = runs["solo12-trot"]
-    assert ice["max_stance_slip"] > 1e-3 and ice["max_stance_slip"] > 5 * dry["max_stance_slip"]
+    assert ice["max_stance_slip"] > 1e-2 and ice["max_stance_slip"] > 1000 * dry["max_stance_slip"]
     slipping = (traj.states == 2).sum() / max(1, ((traj.states == 1) | (traj.states == 2)).sum())
     assert slipping > 0.2  # a fifth of the foot-steps on the ground slide
     assert ice["distance_walked"] < dry["distance_walked"]

@@ -85,20 +85,25 @@ def _rot_z(yaw: float) -> np.ndarray:
 
 class TrotController(Controller):
     """A Raibert-style trot (Raibert, *Legged Robots That Balance*, 1986): the diagonal pairs (FL, HR)
-    and (FR, HL) alternate, each half of ``period`` in stance and half in swing, after standing still
-    for ``start`` seconds.
+    and (FR, HL) half a cycle apart, each foot ``duty`` of the ``period`` in stance, after standing still
+    for ``start`` seconds; the commanded speed ramps up over ``ramp`` seconds. A time-based gait: it
+    reads no contact state.
 
-    Every foot has a target in the base's frame, turned into joint targets by analytic leg inverse
-    kinematics (:meth:`leg_ik`), held by the joint PD:
+    Every foot has a target in the base's frame, turned into joint targets by exact analytic leg
+    inverse kinematics (:meth:`leg_ik`), held by the scene's joint PD:
 
-    - stance: the foot moves backwards at the commanded speed (ramped up over ``ramp`` seconds)
-      from where it touched down, at the standing height, lowered and raised by ``attitude_gain`` to
-      level the base (pitch and roll);
-    - swing: from where the stance left it to the Raibert landing point ``nominal + v T_stance / 2 +
-      raibert_gain (v - v_cmd)`` (v: the base's horizontal velocity, filtered), along a cosine blend
-      with a lift of ``lift`` (a half sine);
-    - feed-forward: each stance foot carries an equal share of the weight, tau = -J^T f (J: the
-      foot's Jacobian in the world-aligned frame; swing legs none).
+    - stance: the target sweeps backwards at the commanded speed from where the foot touched down,
+      ``stance_stiffness`` of the way from the foot's actual position (a softer horizontal spring),
+      at the standing height; legs lengthen where the base dips (``attitude_gain``: pitch and roll);
+    - swing: a cubic Hermite from the lift-off point to Raibert's landing point ``nominal + v_cmd
+      T_stance / 2 + raibert_gain (v - v_cmd)`` (v: the base's filtered horizontal velocity), leaving
+      and reaching the ground at its speed seen from the base, lifted by ``lift sin(pi s)^lift_shape``;
+      gains ``swing_stiffness`` times the scene's;
+    - feed-forward: static equilibrium tau = g(q) - J^T lambda (as ``control.gravity_feedforward``),
+      lambda vertical, the weight shared by the stance feet and moved onto a foot over ``load_ramp``
+      of the cycle after touchdown and off it before lift-off, while the leg's gains soften to
+      ``liftoff_softness`` and its horizontal target joins the foot (so that an unloading foot is not
+      pushed sideways as its normal force vanishes).
 
     The nominal feet and the height are the scene's initial posture, so at t = 0 the targets are the
     initial joints: nothing jumps.
@@ -124,7 +129,7 @@ class TrotController(Controller):
         "swing_stiffness": (2.0, "a swing leg's PD gains relative to the scene's kp, kd (stiffer: it tracks its "
                             "path and touches down at the ground's speed)"),
         "velocity_filter": (0.05, "time constant of the base velocity filter, s"),
-        "feedforward": (1.0, "1: stance feet carry the weight by feed-forward torques, 0: PD only"),
+        "feedforward": (1.0, "scale of the feed-forward torques (1: static equilibrium, 0: PD only)"),
     }
     LEGS = ("FL", "FR", "HL", "HR")
     PAIRS = ((0, 3), (1, 2))  # (FL, HR), (FR, HL)
