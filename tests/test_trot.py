@@ -169,3 +169,20 @@ def test_reset_restarts_the_controller():
     # (not bit for bit: the solver's warm start is the last step's)
     np.testing.assert_allclose(a.q, b.q, rtol=0, atol=1e-6)
     assert math.isfinite(a.q[-1, 0]) and a.q[-1, 0] > 0.01  # it walked (ramping up)
+
+
+def test_cli_runs_the_controller_and_records_it(tmp_path, capsys):
+    """`stiction simulate solo12-trot --record ... --json`: the scene's controller runs (the base moves
+    forward once walking), the summary carries the walking keys and the loop's real-time factor, and the
+    HTML recording is written."""
+    import json
+
+    pytest.importorskip("meshcat")
+    from stiction.cli import main
+
+    html = tmp_path / "trot.html"
+    assert main(["simulate", "solo12-trot", "--duration", "1.2", "--record", str(html), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["distance_walked"] > 0.02 and summary["real_time_factor"] > 0
+    assert summary["max_stance_slip"] < 5e-5 and len(summary["stance_slip_per_contact"]) == 4
+    assert html.stat().st_size > 100_000 and summary["recording"] == str(html)
