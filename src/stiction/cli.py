@@ -12,6 +12,7 @@ import json
 import math
 import os
 import sys
+import time
 from pathlib import Path
 
 
@@ -195,8 +196,13 @@ def cmd_simulate(args) -> int:
     if args.tol is not None:
         overrides["tolerance"] = args.tol
     sim = Simulator(args.scene, **overrides)
-    traj = sim.rollout()
+    started = time.perf_counter()
+    traj = sim.rollout()  # (with the scene's [controller], if any, before every step)
+    wall = time.perf_counter() - started
     summary = sim.summary(traj)
+    if sim.controller is not None:  # the controller's Python runs in the loop: the whole loop's speed
+        summary["wall_seconds"] = wall
+        summary["real_time_factor"] = float(traj.t[-1] - traj.t[0]) / wall
     if args.save:
         traj.save(args.save)
         summary["trajectory"] = args.save

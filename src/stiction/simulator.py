@@ -255,6 +255,11 @@ class Simulator:
         self.model = _core.SimulatorModel(sc.model, sc.halfspaces, sc.contacts, sc.anchors, settings,
                                           sc.geometry, sc.pairs)
         self._data = _core.SimulatorData(self.model)
+        from .controllers import SimulatorLoop, build_controller  # noqa: PLC0415
+
+        #: the scene's controller ([controller] table; None without one): rollout() runs it by default
+        self.controller = build_controller(sc)
+        self._controller_loop = SimulatorLoop(self.controller) if self.controller is not None else None
         self.reset()
 
     @staticmethod
@@ -342,6 +347,8 @@ class Simulator:
         d.q, d.v, d.t = sc.q0, sc.v0, 0.0
         d.kp, d.kd, d.q_target, d.tau_ff = sc.kp, sc.kd, sc.q_target, sc.tau_ff
         d.v_target = np.zeros(sc.model.nv)
+        if getattr(self, "controller", None) is not None:
+            self.controller.reset()
 
     def set_state(self, q=None, v=None, t: float | None = None) -> None:
         """Set the configuration q (nq), velocity v (nv) and/or time t. Arrays are checked for
@@ -368,7 +375,10 @@ class Simulator:
         round(duration / dt) steps are taken. The trajectory records the start, every
         `record_every`-th step and the final state: when the step count is not a multiple of
         `record_every`, its last record follows fewer steps than the others (its `dt` is the step's,
-        so the summary's `steps` and `duration` still count the whole rollout)."""
+        so the summary's `steps` and `duration` still count the whole rollout). A scene with a
+        ``[controller]`` runs it as the callback unless another is given (``self.controller``)."""
+        if callback is None:
+            callback = self._controller_loop
         duration = self.duration if duration is None else _positive("duration", duration)
         if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
             raise ValueError(f"record_every must be an integer >= 1, got {record_every!r}")
@@ -457,6 +467,9 @@ class Simulator:
         """Simulate several initial states of this scene at once on a pool of C++ threads (see
         :func:`batch_rollout`). `states`: a list of (q, v) pairs (either may be None: the scene's),
         or an int n for n copies of the current state. The simulator's own state is unchanged."""
+        if self.controller is not None:
+            raise ValueError(f"batch_rollout: scene {self.scene.name!r} has a controller, which runs in Python "
+                             "before every step; roll it out with rollout()")
         if states is None:
             states = 1
         if isinstance(states, (int, np.integer)) and not isinstance(states, bool):
@@ -594,7 +607,26 @@ class Simulator:
         actuated = bool((self.data.kp != 0).any() or (self.data.kd != 0).any())
         sticking = bool((traj.states[window] == 1).any() and not (traj.states[window] == 2).any())
         out["warnings"] = _warnings(out, swaying=out["settled"] is False and actuated and sticking)
+        if getattr(self, "controller", None) is not None:
+            out.update(_walking_measures(traj, free))
         return out
+
+
+def _walking_measures(traj: Trajectory, free: bool) -> dict:
+    """A controlled robot's measures (summary keys of scenes with a [controller]):
+    distance_walked, the base's displacement along its initial heading (m, first record to last;
+    None without a free-flyer base), and max_stance_slip, the largest slip of a contact point during
+    one stance (a run of steps in which the contact sticks or slips), from the step after its
+    touchdown step: the sum of the norm of the tangential contact velocity times dt (a sphere foot
+    rolling as the leg pivots is not slip). Needs every step recorded (record_every = 1)."""
+    from .controllers import distance_walked, stance_slip  # noqa: PLC0415
+
+    speed = np.linalg.norm(traj.contact_velocity[..., :2], axis=-1)
+    in_contact = (traj.states == 1) | (traj.states == 2)
+    slip = stance_slip(speed[1:], in_contact[1:], traj.dt[1:]) if len(traj.t) > 1 else np.zeros(0)
+    return {"distance_walked": distance_walked(traj.q) if free else None,
+            "max_stance_slip": float(slip.max()) if slip.size else 0.0,
+            "stance_slip_per_contact": [float(x) for x in slip]}
 
 
 def _joint_measures(model: pin.Model, settings, traj: Trajectory, settled_from: int) -> dict:
@@ -752,6 +784,9 @@ def batch_rollout(simulators: list[Simulator], duration: float | None = None, re
             raise TypeError(f"batch_rollout: simulators[{k}] is a {type(s).__name__}, not a Simulator")
         if s.model.settings.mode == _core.IntegrationMode.adaptive:
             raise ValueError(f"batch_rollout: simulators[{k}] uses adaptive steps; roll it out alone")
+        if getattr(s, "controller", None) is not None:
+            raise ValueError(f"batch_rollout: simulators[{k}] has a controller (scene {s.scene.name!r}), which runs "
+                             "in Python before every step; roll it out alone (rollout())")
     if len({id(s.data) for s in sims}) != len(sims):
         raise ValueError("batch_rollout: a simulator appears twice (each simulation needs its own)")
     duration = sims[0].duration if duration is None else _positive("duration", duration)
