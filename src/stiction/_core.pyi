@@ -249,6 +249,9 @@ class SimulatorData:
 
     def __init__(self, sim: SimulatorModel = ...) -> None: ...
     @property
+    def accelerometer(self) -> numpy.ndarray: ...
+
+    @property
     def active(self) -> tuple: ...
 
     @property
@@ -265,6 +268,9 @@ class SimulatorData:
 
     @property
     def candidate_lambda(self) -> numpy.ndarray: ...
+
+    @property
+    def contact_force(self) -> numpy.ndarray: ...
 
     @property
     def contact_velocity(self) -> numpy.ndarray: ...
@@ -326,6 +332,9 @@ class SimulatorData:
 
     @property
     def rows(self) -> numpy.ndarray: ...
+
+    @property
+    def sensor_time(self) -> float: ...
 
     @property
     def sparse(self) -> bool: ...

@@ -12,6 +12,7 @@ import json
 import math
 import os
 import sys
+import time
 from pathlib import Path
 
 
@@ -195,8 +196,13 @@ def cmd_simulate(args) -> int:
     if args.tol is not None:
         overrides["tolerance"] = args.tol
     sim = Simulator(args.scene, **overrides)
-    traj = sim.rollout()
+    started = time.perf_counter()
+    traj = sim.rollout()  # (with the scene's [controller], if any, before every step)
+    wall = time.perf_counter() - started
     summary = sim.summary(traj)
+    if sim.controller is not None:  # the controller's Python runs in the loop: the whole loop's speed
+        summary["wall_seconds"] = wall
+        summary["real_time_factor"] = float(traj.t[-1] - traj.t[0]) / wall
     if args.save:
         traj.save(args.save)
         summary["trajectory"] = args.save
@@ -446,7 +452,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_formulations)
 
-    p = sub.add_parser("bench", help="benchmarks: scaling, work-precision, profiles, stability, all")
+    p = sub.add_parser("bench", help="benchmarks: scaling, work-precision, profiles, stability, creep, all")
     bench_sub = p.add_subparsers(dest="bench", required=True, parser_class=_Parser, metavar="BENCH")
     from .bench import available_benches, load_bench, sweep
 

@@ -215,6 +215,15 @@ ARRAY = Table("array", "An array of free bodies (instead of `robot`, `urdf` or `
     Key("seed", "int", "pile: the random seed of the bodies' kinds, positions and orientations", 0, low=0),
 ))
 
+CONTROLLER = Table("controller", "A controller run before every step by `Simulator.rollout` and `stiction simulate` "
+                   "(stiction.controllers: it reads q, v, t and writes the joint PD's tau_ff, q_target, v_target, kp, "
+                   "kd; docs/controllers.md).", (
+    Key("name", "str", "a bundled controller (stiction.controllers.CONTROLLERS: trot) or \"module:Class\" of your "
+        "own, imported from the Python path", required=True),
+    Key("parameters", "named_numbers", "the controller's parameters by name (each checked against its PARAMETERS; "
+        "default: the controller's defaults)"),
+))
+
 SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `bodies` or `[array]`, the ground, contacts, control, "
               "the initial state.", (
     Key("name", "str", "scene name (default: the file name)"),
@@ -234,7 +243,7 @@ SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `bodies` or `[a
         choices=("timestep", "rk4", "ode", "adaptive")),
     Key("delta", "float", "ODE modes: Baumgarte delta in s (0: dt)", 0.0, low=0.0),
     Key("zeta", "float", "ODE modes: Baumgarte zeta", 0.5, low=0.0, low_open=True),
-), tables=(GROUND, CONTACTS, CONTROL, JOINTS, INITIAL, WALLS, ANCHORS, COLLISION, ARRAY, OBJECTS))
+), tables=(GROUND, CONTACTS, CONTROL, JOINTS, INITIAL, WALLS, ANCHORS, COLLISION, ARRAY, OBJECTS, CONTROLLER))
 
 
 def _where(path: str) -> str:
@@ -371,6 +380,10 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
         if len(given) != 1:
             raise SceneError("a scene needs exactly one of `robot`, `urdf`, `bodies` or `[array]`" +
                              (f", got {', '.join(given)}" if given else ""))
+        if "controller" not in cfg:
+            out["controller"] = None
+        else:
+            _check_controller(out["controller"])
         if "array" not in cfg:
             out["array"] = None
         else:
@@ -422,6 +435,23 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
     except SceneError as exc:
         raise SceneError(f"{source}: {exc}") from None
     return out
+
+
+def _check_controller(cfg: dict) -> None:
+    """[controller]: a bundled name (did you mean ...) and its parameter names; a user's
+    "module:Class" is imported when the simulator is built, not here."""
+    name = cfg["name"]
+    if ":" in name:
+        module, _, attr = name.partition(":")
+        if not module or not attr:
+            raise SceneError(f"controller.name = {name!r}: write \"module:Class\" for a controller of your own")
+        return
+    from .controllers import CONTROLLERS, check_parameters  # noqa: PLC0415 - (imports this module)
+
+    if name not in CONTROLLERS:
+        raise SceneError(f"controller.name = {name!r}: unknown controller ({did_you_mean(name, CONTROLLERS)}"
+                         f"bundled: {', '.join(CONTROLLERS)}; or \"module:Class\")")
+    check_parameters(CONTROLLERS[name], cfg["parameters"] or {})
 
 
 # ---- documentation

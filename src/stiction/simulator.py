@@ -13,6 +13,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import _core
+from . import sensors as _sensors
 from ._validation import positive as _positive
 from ._validation import vector as _vector
 from .scene import Scene, _quaternion_check, load_scene
@@ -49,7 +50,8 @@ def _states(recorded: np.ndarray) -> np.ndarray:
 class Trajectory:
     """A recorded rollout. Shapes: N records, nc candidate contacts.
 
-    t (N,), q (N, nq), v (N, nv); lam (N, nc, 3) contact forces (t1, t2, n) in N;
+    t (N,), q (N, nq), v (N, nv); lam (N, nc, 3) contact forces (t1, t2, n) in N (time stepping:
+    the step's impulse / h, eq. 70), each in its contact's frame (world: contact_force);
     contact_velocity (N, nc, 3) J v after each step; gaps (N, nc) signed distances (of the
     configuration the step's contact problem was built at: the step's start in time stepping);
     states (N, nc) 0 open / 1 stick / 2 slip / 3 closed; residual (N,) the largest solver
@@ -62,6 +64,16 @@ class Trajectory:
     exceeds it); joint_friction (N, nv) the joints' dry friction torque and limit_torque (N, nv) the
     position limits' torque, 0 where the joint had no such row (all three NaN in record 0; None in
     files saved before they were recorded).
+    Sensors (docs/simulator.md, "Sensors"; stiction.sensors): contact_force (N, nc, 3) each
+    candidate's force in the world frame, N (lam turned by the contact frame of the step's problem:
+    the force on the contact's own body); frame_names, the frames carrying contacts, frame_incidence
+    (nf, nc) int8 (+1: the contact's force acts on the frame, -1: its opposite), frame_force (N, nf, 3)
+    their total world force and frame_states (N, nf) one state per frame (2 slip if a contact slips,
+    1 stick, 3 closed, 0 open, -1 no step); accelerometer (N, 3) and gyro (N, 3) the IMU at the first
+    root free flyer's origin in its frame (proper acceleration R0^T (a - g) of the step, m/s^2; angular
+    velocity of the record's state, rad/s; None without a free flyer). Look forces up by name with
+    contact_force_of(name) and frame_force_of(name). Record 0: NaN (states -1) but the gyro, which is
+    its state's. All None in files saved before they were recorded.
 
     Record 0 is the state the rollout started from, before any step: its gaps are that state's
     signed distances, its rows the rows each contact would have there, its contact_velocity
@@ -91,10 +103,18 @@ class Trajectory:
     tau: np.ndarray | None = None
     joint_friction: np.ndarray | None = None
     limit_torque: np.ndarray | None = None
+    contact_force: np.ndarray | None = None
+    frame_names: list[str] | None = None
+    frame_incidence: np.ndarray | None = None
+    frame_force: np.ndarray | None = None
+    frame_states: np.ndarray | None = None
+    accelerometer: np.ndarray | None = None
+    gyro: np.ndarray | None = None
 
     def save(self, path: str | Path) -> None:
         arrays = {k: v for k, v in asdict(self).items() if isinstance(v, np.ndarray)}
-        np.savez_compressed(path, scene=self.scene, contact_names=np.array(self.contact_names), **arrays)
+        names = {} if self.frame_names is None else {"frame_names": np.array(self.frame_names, dtype=str)}
+        np.savez_compressed(path, scene=self.scene, contact_names=np.array(self.contact_names), **names, **arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> "Trajectory":
@@ -102,7 +122,26 @@ class Trajectory:
             kw = {k: f[k] for k in f.files}
         kw["scene"] = str(kw["scene"])
         kw["contact_names"] = [str(x) for x in kw["contact_names"]]
+        if "frame_names" in kw:
+            kw["frame_names"] = [str(x) for x in kw["frame_names"]]
         return cls(**kw)
+
+    def contact_force_of(self, name: str) -> np.ndarray:
+        """The world force (N, 3) of the contact named `name` (a coal pair slot: ``pair#k``)."""
+        if self.contact_force is None:
+            raise ValueError("this trajectory has no contact_force (saved before sensors were recorded)")
+        return self.contact_force[:, _sensors.lookup(self.contact_names, name, "contact")]
+
+    def frame_force_of(self, name: str) -> np.ndarray:
+        """The total world force (N, 3) on the frame named `name` (e.g. a foot: docs/simulator.md, "Sensors")."""
+        if self.frame_force is None or self.frame_names is None:
+            raise ValueError("this trajectory has no frame_force (saved before sensors were recorded)")
+        return self.frame_force[:, _sensors.lookup(self.frame_names, name, "contact frame")]
+
+    @property
+    def frame_in_contact(self) -> np.ndarray | None:
+        """(N, nf) bool: some contact of the frame carries a force in the step (stick, slip or closed)."""
+        return None if self.frame_states is None else self.frame_states > 0
 
 
 # Every override Simulator(scene, **overrides) accepts, and what it sets.
@@ -219,6 +258,11 @@ class Simulator:
         self.model = _core.SimulatorModel(sc.model, sc.halfspaces, sc.contacts, sc.anchors, settings,
                                           sc.geometry, sc.pairs)
         self._data = _core.SimulatorData(self.model)
+        from .controllers import SimulatorLoop, build_controller  # noqa: PLC0415
+
+        #: the scene's controller ([controller] table; None without one): rollout() runs it by default
+        self.controller = build_controller(sc)
+        self._controller_loop = SimulatorLoop(self.controller) if self.controller is not None else None
         self.reset()
 
     @staticmethod
@@ -306,6 +350,8 @@ class Simulator:
         d.q, d.v, d.t = sc.q0, sc.v0, 0.0
         d.kp, d.kd, d.q_target, d.tau_ff = sc.kp, sc.kd, sc.q_target, sc.tau_ff
         d.v_target = np.zeros(sc.model.nv)
+        if getattr(self, "controller", None) is not None:
+            self.controller.reset()
 
     def set_state(self, q=None, v=None, t: float | None = None) -> None:
         """Set the configuration q (nq), velocity v (nv) and/or time t. Arrays are checked for
@@ -336,7 +382,10 @@ class Simulator:
         round(duration / dt) steps are taken. The trajectory records the start, every
         `record_every`-th step and the final state: when the step count is not a multiple of
         `record_every`, its last record follows fewer steps than the others (its `dt` is the step's,
-        so the summary's `steps` and `duration` still count the whole rollout)."""
+        so the summary's `steps` and `duration` still count the whole rollout). A scene with a
+        ``[controller]`` runs it as the callback unless another is given (``self.controller``)."""
+        if callback is None:
+            callback = self._controller_loop
         duration = self.duration if duration is None else _positive("duration", duration)
         if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)) or record_every < 1:
             raise ValueError(f"record_every must be an integer >= 1, got {record_every!r}")
@@ -384,13 +433,43 @@ class Simulator:
             residual=rec["residual"], iterations=rec["iterations"].astype(np.int32),
             converged=rec["converged"].astype(bool), dt=rec["dt"], timings=rec["timings"],
             rows=rec["rows"].astype(np.int8).reshape(n, nc), tau=rec["tau"], joint_friction=rec["joint_friction"],
-            limit_torque=rec["limit_torque"])
+            limit_torque=rec["limit_torque"], **self._sensor_fields(rec, n, nc))
+
+    def _sensor_frames(self) -> tuple[list[str], np.ndarray]:
+        """The frames carrying contacts and their incidence matrix (stiction.sensors.frame_incidence)."""
+        if getattr(self, "_frames_cache", None) is None:
+            self._frames_cache = _sensors.frame_incidence(self.scene)
+        return self._frames_cache
+
+    def _sensor_fields(self, rec: dict, n: int, nc: int) -> dict:
+        """The Trajectory's sensor fields from a recording (docs/simulator.md, "Sensors")."""
+        model = self.scene.model
+        contact_force = rec["contact_force"].reshape(n, nc, 3)
+        names, incidence = self._sensor_frames()
+        frame_force, frame_states = _sensors.frame_totals(incidence, contact_force,
+                                                          _states(rec["states"]).reshape(n, nc))
+        j = _sensors.imu_joint(model)
+        iv = model.joints[j].idx_v if j else 0
+        return {"contact_force": contact_force, "frame_names": list(names), "frame_incidence": incidence.copy(),
+                "frame_force": frame_force, "frame_states": frame_states,
+                "accelerometer": rec["accelerometer"].reshape(n, 3) if j else None,
+                "gyro": rec["v"][:, iv + 3:iv + 6].copy() if j else None}
+
+    def sensors(self) -> "_sensors.Sensors":
+        """The sensors after the last step, as a Trajectory records them per step (docs/simulator.md,
+        "Sensors"): contact forces in the world frame and by name, per-frame totals and states, the base's
+        IMU and the applied joint torques. NaN (states -1) when no step is behind the current state (a
+        fresh or reset simulator, or its time set since); the gyro is always the current state's."""
+        return _sensors.read(self)
 
     def batch_rollout(self, states=None, duration: float | None = None, record_every: int = 1,
                       threads: int | None = None) -> "Batch":
         """Simulate several initial states of this scene at once on a pool of C++ threads (see
         :func:`batch_rollout`). `states`: a list of (q, v) pairs (either may be None: the scene's),
         or an int n for n copies of the current state. The simulator's own state is unchanged."""
+        if self.controller is not None:
+            raise ValueError(f"batch_rollout: scene {self.scene.name!r} has a controller, which runs in Python "
+                             "before every step; roll it out with rollout()")
         if states is None:
             states = 1
         if isinstance(states, (int, np.integer)) and not isinstance(states, bool):
@@ -528,7 +607,26 @@ class Simulator:
         actuated = bool((self.data.kp != 0).any() or (self.data.kd != 0).any())
         sticking = bool((traj.states[window] == 1).any() and not (traj.states[window] == 2).any())
         out["warnings"] = _warnings(out, swaying=out["settled"] is False and actuated and sticking)
+        if getattr(self, "controller", None) is not None:
+            out.update(_walking_measures(traj, free))
         return out
+
+
+def _walking_measures(traj: Trajectory, free: bool) -> dict:
+    """A controlled robot's measures (summary keys of scenes with a [controller]):
+    distance_walked, the base's displacement along its initial heading (m, first record to last;
+    None without a free-flyer base), and max_stance_slip, the largest slip of a contact point during
+    one stance (a run of steps in which the contact sticks or slips), from the step after its
+    touchdown step: the sum of the norm of the tangential contact velocity times dt (a sphere foot
+    rolling as the leg pivots is not slip). Needs every step recorded (record_every = 1)."""
+    from .controllers import distance_walked, stance_slip  # noqa: PLC0415
+
+    speed = np.linalg.norm(traj.contact_velocity[..., :2], axis=-1)
+    in_contact = (traj.states == 1) | (traj.states == 2)
+    slip = stance_slip(speed[1:], in_contact[1:], traj.dt[1:]) if len(traj.t) > 1 else np.zeros(0)
+    return {"distance_walked": distance_walked(traj.q) if free else None,
+            "max_stance_slip": float(slip.max()) if slip.size else 0.0,
+            "stance_slip_per_contact": [float(x) for x in slip]}
 
 
 def _joint_measures(model: pin.Model, settings, traj: Trajectory, settled_from: int) -> dict:
@@ -686,6 +784,9 @@ def batch_rollout(simulators: list[Simulator], duration: float | None = None, re
             raise TypeError(f"batch_rollout: simulators[{k}] is a {type(s).__name__}, not a Simulator")
         if s.model.settings.mode == _core.IntegrationMode.adaptive:
             raise ValueError(f"batch_rollout: simulators[{k}] uses adaptive steps; roll it out alone")
+        if getattr(s, "controller", None) is not None:
+            raise ValueError(f"batch_rollout: simulators[{k}] has a controller (scene {s.scene.name!r}), which runs "
+                             "in Python before every step; roll it out alone (rollout())")
     if len({id(s.data) for s in sims}) != len(sims):
         raise ValueError("batch_rollout: a simulator appears twice (each simulation needs its own)")
     duration = sims[0].duration if duration is None else _positive("duration", duration)

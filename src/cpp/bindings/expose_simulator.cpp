@@ -216,6 +216,10 @@ NdArray get_pair_points(const SimulatorData& d) { return readOnlyCopy(Eigen::Mat
 NdArray get_pair_normals(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.slot_normal)); }
 NdArray get_pair_t1(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.slot_t1)); }
 NdArray get_pair_t2(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.slot_t2)); }
+// Sensors of the last step (src/cpp/sim/sensors.cpp; Simulator.sensors() reads them)
+NdArray get_contact_force(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.contact_force)); }
+NdArray get_accelerometer(const SimulatorData& d) { return readOnlyCopy(d.out.accelerometer); }
+double get_sensor_time(const SimulatorData& d) { return d.out.sensor_time; }
 // The last solve's result; its exact-law measures taken here (the step leaves them to whoever asks:
 // a robot's step spent ~4 % of its time on them), of the problem it solved, still in d.work->problem.
 SolverResult get_result(const SimulatorData& d) {
@@ -348,6 +352,8 @@ bp::dict recordingDict(const Recording& rec) {
   vector("converged", rec.converged);
   vector("dt", rec.dt);
   matrix("timings", rec.timings);
+  matrix("contact_force", rec.contact_force);
+  matrix("accelerometer", rec.accelerometer);
   return out;
 }
 
@@ -628,6 +634,13 @@ void exposeSimulator() {
       .add_property("pair_t1", &get_pair_t1,
                     "3 x candidates: each coal pair slot's first tangent (rows t1, t2, n: the slot's lambda)")
       .add_property("pair_t2", &get_pair_t2, "3 x candidates: each coal pair slot's second tangent")
+      .add_property("contact_force", &get_contact_force,
+                    "3 x candidates: each candidate's force in the world frame after the last step, N (on the "
+                    "contact's own body: the sphere's, a coal pair's second geometry's; 0 inactive)")
+      .add_property("accelerometer", &get_accelerometer,
+                    "3: the last step's proper acceleration R0^T (a - g) of the first root free flyer's origin, "
+                    "in its frame (NaN without one or before a step)")
+      .add_property("sensor_time", &get_sensor_time, "t when the last step's sensors were read (NaN: no step yet)")
       .add_property("states", &get_states, "per candidate: its ContactState at the last step (a tuple)")
       .add_property("rows", &get_candidate_rows, "per candidate: rows in the last problem (0: inactive)")
       .add_property("result", &get_result,

@@ -386,6 +386,7 @@ SimulatorData::SimulatorData(const SimulatorModel& sim)
   out.tau.resize(nv);
   out.nle.resize(nv);
   out.candidate_lambda = Eigen::MatrixXd::Zero(3, nc);
+  out.contact_force = Eigen::Matrix3Xd::Zero(3, nc);
   out.have_candidate_lambda.assign(nc, false);
   out.anchor_lambda = Eigen::MatrixXd::Zero(3, sim.anchors.size());
   out.candidate_spring = Eigen::MatrixXd::Zero(3, nc);

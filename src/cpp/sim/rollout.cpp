@@ -40,7 +40,9 @@ std::vector<Array> arrays(const SimulatorModel& sim) {
           {"iterations", &R::iterations, nullptr, -1},
           {"converged", &R::converged, nullptr, -1},
           {"dt", &R::dt, nullptr, -1},
-          {"timings", nullptr, &R::timings, 5}};
+          {"timings", nullptr, &R::timings, 5},
+          {"contact_force", nullptr, &R::contact_force, 3 * nc},
+          {"accelerometer", nullptr, &R::accelerometer, 3}};
 }
 
 }  // namespace
@@ -127,6 +129,13 @@ void Recording::record(const SimulatorModel& sim, const SimulatorData& d, bool i
     tau.row(r) = d.out.actuator_torque.transpose();
     joint_friction.row(r) = d.out.friction_torque.transpose();
     limit_torque.row(r) = d.out.limit_torque.transpose();
+  }
+  if (initial) {  // (sensors: no step behind this record)
+    contact_force.row(r).setConstant(kNaN);
+    accelerometer.row(r).setConstant(kNaN);
+  } else {
+    contact_force.row(r) = Eigen::Map<const Eigen::RowVectorXd>(d.out.contact_force.data(), 3 * nc);
+    accelerometer.row(r) = d.out.accelerometer.transpose();
   }
   residual[r] = d.out.max_residual_step;
   iterations[r] = d.out.iterations_step;

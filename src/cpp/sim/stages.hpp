@@ -139,6 +139,11 @@ void integrateRK4(const SimulatorModel& sim, SimulatorData& sd);
 void integrateAdaptive(const SimulatorModel& sim, SimulatorData& sd);
 
 
+/// 7. Sensors (sensors.cpp): before a step, the IMU joint's start state; after it, each candidate's
+/// world force and the IMU (SimulatorOutputs::contact_force, accelerometer, sensor_time).
+void sensorsBeforeStep(const SimulatorModel& sim, SimulatorData& sd);
+void sensorsAfterStep(const SimulatorModel& sim, SimulatorData& sd);
+
 // ---- the world's parts (SimulatorModel::systems, SimulatorData::parts)
 
 /// local = the entries `index` of x (contiguous from `start` when start >= 0).

@@ -213,6 +213,7 @@ void contactsAtState(const SimulatorModel& sim, SimulatorData& sd) {
 void step(const SimulatorModel& sim, SimulatorData& sd) {
   const auto start = Clock::now();
   const bool first = beginStep(sim, sd);  // statistics to zero, state size, blow-up reference
+  sensorsBeforeStep(sim, sd);             // (the IMU's start state)
   switch (sim.settings.mode) {
     case IntegrationMode::kTimeStepping: {  // eq. 70: delta = h, zeta = 1/2, impulses P = h lambda
       const double h = sim.settings.dt;
@@ -261,6 +262,7 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
   // ODE modes: the joints' torques of the last right-hand side (the actuators' explicit, clamped)
   if (sim.settings.mode != IntegrationMode::kTimeStepping) finishJointRows(sim, sd, sd.v, 0.0, 0.0);
   endStep(sim, sd, first);  // finite, not blown up; contact velocities J v
+  sensorsAfterStep(sim, sd);  // world contact forces, IMU
   sd.out.timings.total = microseconds(start, Clock::now());
 }
 

@@ -161,6 +161,11 @@ struct SimulatorWorkspace {
   Eigen::VectorXd step_q0, step_v0;
   Eigen::VectorXd control_torque;  ///< the control torque at the step's start (computeControl, clamped)
 
+  /// Sensors (sensors.cpp): the IMU joint's (SimulatorOutputs::accelerometer) quaternion (x, y, z, w)
+  /// and twist (local: linear, angular) at the step's start.
+  Eigen::Vector4d imu_quaternion0 = Eigen::Vector4d::Zero();
+  Eigen::Matrix<double, 6, 1> imu_twist0 = Eigen::Matrix<double, 6, 1>::Zero();
+
   Eigen::VectorXd row_scratch;  ///< one value per row
   Eigen::VectorXd nv_scratch;   ///< one value per velocity coordinate
 };

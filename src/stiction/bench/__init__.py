@@ -4,7 +4,8 @@ resumable CSV and PNG charts with ``--out`` (see :mod:`stiction.bench.sweep` for
 - ``scaling``: cost per step against contact count (issue: scale);
 - ``work-precision``: error against the exact answer vs wall time per simulated second, per method;
 - ``profiles``: the solvers alone on problem sets (FCLib, the robot set): performance profiles;
-- ``stability``: where each method fails, as maps of its first failure mode.
+- ``stability``: where each method fails, as maps of its first failure mode;
+- ``creep``: slip of a body friction must hold (grasp, ramp, slope) against the friction margin.
 """
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import importlib
 from types import ModuleType
 
 BENCHES = {"scaling": "scaling", "work-precision": "work_precision", "profiles": "profiles",
-           "stability": "stability"}
+           "stability": "stability", "creep": "creep"}
 
 # `stiction bench all --out DIR`: every figure of docs/benchmarks.md
 ALL_RUNS = (
@@ -21,6 +22,7 @@ ALL_RUNS = (
     ("work-precision",),
     ("profiles",),
     ("stability",),
+    ("creep",),
 )
 
 

@@ -27,6 +27,8 @@ struct Recording {
   Eigen::Map<Rows> q{nullptr, 0, 0}, v{nullptr, 0, 0}, lam{nullptr, 0, 0}, contact_velocity{nullptr, 0, 0},
       gaps{nullptr, 0, 0}, states{nullptr, 0, 0}, rows{nullptr, 0, 0}, anchor_lam{nullptr, 0, 0},
       tau{nullptr, 0, 0}, joint_friction{nullptr, 0, 0}, limit_torque{nullptr, 0, 0}, timings{nullptr, 0, 0};
+  /// Sensors (SimulatorOutputs::contact_force, 3 per candidate, world; accelerometer, 3; NaN in record 0).
+  Eigen::Map<Rows> contact_force{nullptr, 0, 0}, accelerometer{nullptr, 0, 0};
   int records = 0;       ///< rows filled (fewer than allocated when the rollout stopped early)
   std::string error;     ///< why it stopped early (the step's exception), empty when it ran to the end
 

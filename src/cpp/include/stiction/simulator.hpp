@@ -18,6 +18,7 @@
 // sized once: a step allocates only when the number of active contacts changes.
 #pragma once
 
+#include <limits>
 #include <memory>
 #include <string>
 #include <utility>
@@ -327,6 +328,19 @@ struct SimulatorOutputs {
   Eigen::MatrixXd candidate_velocity;  ///< 3 x candidates, contact velocity J v after the step
   /// coal pairs: the contact each slot holds now (per candidate; pair slots only)
   Eigen::Matrix3Xd slot_point, slot_normal, slot_t1, slot_t2;
+
+  // Sensors of the last step (src/cpp/sim/sensors.cpp; docs/simulator.md, "Sensors"), written at its end.
+  /// 3 x candidates: each candidate's force in the world frame, N: candidate_lambda (t1, t2, n) turned
+  /// by the contact frame its problem was built in (time stepping: the step's start; ODE modes: the last
+  /// right-hand side's). The force on the contact's own body (the sphere's; a coal pair's second
+  /// geometry's); the other side (a moving half-space's body, the first geometry's) gets its opposite.
+  Eigen::Matrix3Xd contact_force;
+  /// The IMU at the origin of the first free flyer hanging from the universe (a robot's base), in its
+  /// frame at the step's start: the proper acceleration R0^T (a - g) of the step, a = (R1 v1 - R0 v0) / h
+  /// the change of the origin's world velocity (at rest +|g| up, 0 in a free fall). NaN without such
+  /// a joint or before a step.
+  Eigen::Vector3d accelerometer = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+  double sensor_time = std::numeric_limits<double>::quiet_NaN();  ///< t when the sensors were read (NaN: no step yet)
 
   // Statistics of the last step (ODE modes solve once per right-hand side).
   StepTimings timings;

@@ -1,0 +1,504 @@
+"""Controllers in the loop: a scene names one, ``Simulator.rollout`` runs it before every step.
+
+A controller is written against the public state and control only, so the same object drives
+stiction and its MuJoCo twin (:class:`MujocoLoop`):
+
+- it is built as ``Controller(scene, **parameters)`` (a :class:`stiction.scene.Scene`: the robot's
+  ``pinocchio.Model``, its initial state, time step and gains);
+- ``reset()`` forgets its memory (the Simulator calls it on ``reset()``);
+- ``controller(state, control)`` is called before every step with the state (``state.q``,
+  ``state.v`` in Pinocchio's coordinates, ``state.t``) and writes the step's control *in place* into
+  ``control.tau_ff``, ``.q_target``, ``.v_target``, ``.kp``, ``.kd`` (stiction's ``sim.data``
+  views, or the arrays the MuJoCo loop maps to its actuators). The joint PD is the simulator's:
+  ``tau = tau_ff + kp (q_target - q) + kd (v_target - v)``, implicit in the step.
+
+A scene names its controller in a ``[controller]`` table: ``name`` is a bundled controller
+(:data:`CONTROLLERS`) or ``"module:Class"`` for a user's own (imported from the Python path), and
+``parameters`` its numbers (each checked against the class's ``PARAMETERS``, a typo is an error
+with the closest name).
+
+Bundled: ``trot`` (:class:`TrotController`), a Raibert-style trot for a four-legged robot with
+Solo-12's leg layout (hip abduction about x, hip and knee flexion about y).
+"""
+from __future__ import annotations
+
+import importlib
+import math
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import numpy as np
+import pinocchio as pin
+
+from .scene_schema import SceneError, did_you_mean
+
+
+@dataclass
+class State:
+    """What a controller reads: Pinocchio's q (nq), v (nv; a free flyer's in its base frame) and t."""
+
+    q: np.ndarray
+    v: np.ndarray
+    t: float
+
+
+class Controller:
+    """Base of the controllers: ``PARAMETERS`` maps each parameter to (default, meaning)."""
+
+    PARAMETERS: dict[str, tuple[float, str]] = {}
+
+    def __init__(self, scene, **parameters):
+        self.scene = scene
+        self.parameters = check_parameters(type(self), parameters)
+
+    def reset(self) -> None:
+        """Forget what earlier steps left (called when the simulation restarts)."""
+
+    def __call__(self, state: State, control) -> None:
+        raise NotImplementedError
+
+
+def check_parameters(cls, parameters: dict, where: str = "controller.parameters") -> dict:
+    """The parameters with the class's defaults filled in; an unknown name is a SceneError naming the
+    closest known one, a value that is not a finite number too."""
+    known = getattr(cls, "PARAMETERS", None)
+    out = {}
+    for name, value in parameters.items():
+        if known is not None and name not in known:
+            hint = did_you_mean(name, known)
+            raise SceneError(f"{where}: unknown parameter {name!r} of {cls.__name__} "
+                             f"({hint}valid: {', '.join(known) or 'none'})")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise SceneError(f"{where}.{name} = {value!r}: must be a finite number")
+        out[name] = float(value)
+    for name, (default, _) in (known or {}).items():
+        out.setdefault(name, float(default))
+    return out
+
+
+# ---------------------------------------------------------------- a trot
+
+def _rot_z(yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+class TrotController(Controller):
+    """A Raibert-style trot (Raibert, *Legged Robots That Balance*, 1986): the diagonal pairs (FL, HR)
+    and (FR, HL) half a cycle apart, each foot ``duty`` of the ``period`` in stance, after standing still
+    for ``start`` seconds; the commanded speed ramps up over ``ramp`` seconds. A time-based gait: it
+    reads no contact state.
+
+    Every foot has a target in the base's frame, turned into joint targets by exact analytic leg
+    inverse kinematics (:meth:`leg_ik`), held by the scene's joint PD:
+
+    - stance: the target sweeps backwards at the commanded speed from where the foot touched down,
+      ``stance_stiffness`` of the way from the foot's actual position (a softer horizontal spring),
+      at the standing height; legs lengthen where the base dips (``attitude_gain``: pitch and roll);
+    - swing: a cubic Hermite from the lift-off point to Raibert's landing point ``nominal + v_cmd
+      T_stance / 2 + raibert_gain (v - v_cmd)`` (v: the base's filtered horizontal velocity), leaving
+      and reaching the ground at its speed seen from the base, lifted by ``lift sin(pi s)^lift_shape``;
+      gains ``swing_stiffness`` times the scene's;
+    - feed-forward: static equilibrium tau = g(q) - J^T lambda (as ``control.gravity_feedforward``),
+      lambda vertical, the weight shared by the stance feet and moved onto a foot over ``load_ramp``
+      of the cycle after touchdown and off it before lift-off, while the leg's gains soften to
+      ``liftoff_softness`` and its horizontal target joins the foot (so that an unloading foot is not
+      pushed sideways as its normal force vanishes).
+
+    The nominal feet and the height are the scene's initial posture, so at t = 0 the targets are the
+    initial joints: nothing jumps.
+    """
+
+    PARAMETERS = {
+        "speed": (0.3, "forward speed commanded, m/s (along the base's initial heading)"),
+        "period": (0.3, "gait cycle, s"),
+        "duty": (0.55, "fraction of the cycle a foot is in stance (> 0.5: all four feet down around each switch)"),
+        "load_ramp": (0.05, "fraction of the cycle over which the weight moves onto a foot after touchdown and off "
+                      "it before lift-off"),
+        "lift": (0.04, "swing foot lift, m"),
+        "lift_shape": (2.0, "the swing height is lift sin(pi s)^lift_shape (s: the swing's progress; 1: the foot leaves "
+                       "and reaches the ground at once, 2: with zero vertical velocity)"),
+        "start": (0.5, "standing time before the first step, s"),
+        "ramp": (0.5, "time over which the commanded speed rises from 0, s"),
+        "raibert_gain": (0.05, "foot placement per m/s of velocity error, s"),
+        "attitude_gain": (0.15, "stance foot lowering per rad of pitch or roll, m/rad"),
+        "stance_stiffness": (0.5, "fraction of the way from a stance foot's position to its sweep that its "
+                             "horizontal target is set (1: the sweep itself; ramps to 0 before lift-off)"),
+        "liftoff_softness": (0.2, "the lowest fraction of the scene's kp, kd a stance leg softens to before lift-off "
+                             "(1: never)"),
+        "swing_stiffness": (2.0, "a swing leg's PD gains relative to the scene's kp, kd (stiffer: it tracks its "
+                            "path and touches down at the ground's speed)"),
+        "velocity_filter": (0.05, "time constant of the base velocity filter, s"),
+        "feedforward": (1.0, "scale of the feed-forward torques (1: static equilibrium, 0: PD only)"),
+    }
+    LEGS = ("FL", "FR", "HL", "HR")
+    PAIRS = ((0, 3), (1, 2))  # (FL, HR), (FR, HL)
+
+    def __init__(self, scene, **parameters):
+        super().__init__(scene, **parameters)
+        model = scene.model
+        if model.njoints < 2 or model.joints[1].shortname() != "JointModelFreeFlyer":
+            raise ValueError("TrotController: the robot needs a free-flyer base")
+        self.model = model
+        self.data = model.createData()
+        self.feet, self.legs = [], []
+        for leg in self.LEGS:
+            names = [f"{leg}_HAA", f"{leg}_HFE", f"{leg}_KFE"]
+            missing = [n for n in names + [f"{leg}_FOOT"] if not (model.existJointName(n) or
+                                                                   model.existFrame(n))]
+            if missing:
+                raise ValueError(f"TrotController: the robot has no {', '.join(missing)} (it needs Solo-12's "
+                                 "legs FL, FR, HL, HR with joints HAA, HFE, KFE and a FOOT frame)")
+            joints = [model.getJointId(n) for n in names]
+            self.legs.append(joints)
+            self.feet.append(model.getFrameId(f"{leg}_FOOT"))
+        self.iq = np.array([[model.joints[j].idx_q for j in leg] for leg in self.legs])
+        self.iv = np.array([[model.joints[j].idx_v for j in leg] for leg in self.legs])
+        self._geometry()
+        q0 = scene.q0
+        pin.framesForwardKinematics(model, self.data, q0)
+        base = self.data.oMi[1]
+        # nominal feet: the initial posture's, in the base frame
+        self.nominal = np.array([base.actInv(self.data.oMf[f].translation) for f in self.feet])
+        self.weight = pin.computeTotalMass(model) * float(np.linalg.norm(model.gravity.linear))
+        self.yaw0 = self._yaw(q0)
+        self.reset()
+
+    def _geometry(self) -> None:
+        """Each leg's lengths from the model: the hip (HAA) origin in the base, the lateral offset of the
+        sagittal leg plane from the HAA axis, and the thigh and shank lengths."""
+        m = self.model
+        self.hip, self.lateral, self.thigh, self.shank = [], [], [], []
+        for leg, foot in zip(self.legs, self.feet):
+            haa, hfe, kfe = leg
+            self.hip.append(np.asarray(m.jointPlacements[haa].translation, dtype=float))
+            p_hfe = np.asarray(m.jointPlacements[hfe].translation, dtype=float)
+            p_kfe = np.asarray(m.jointPlacements[kfe].translation, dtype=float)
+            p_foot = np.asarray(m.frames[foot].placement.translation, dtype=float)
+            if abs(p_hfe[0]) + abs(p_hfe[2]) + abs(p_kfe[0]) + abs(p_foot[0]) > 1e-9:
+                raise ValueError("TrotController: the legs must be planar in their HAA frame (Solo-12's layout)")
+            self.lateral.append(p_hfe[1] + p_kfe[1] + p_foot[1])
+            self.thigh.append(-p_kfe[2])
+            self.shank.append(-p_foot[2])
+        self.knee_sign = []  # the initial posture's knee bend (front: negative, hind: positive for Solo-12)
+        for leg in self.legs:
+            self.knee_sign.append(1.0 if self.scene.q0[self.model.joints[leg[2]].idx_q] >= 0 else -1.0)
+
+    @staticmethod
+    def _yaw(q: np.ndarray) -> float:
+        R = pin.Quaternion(q[3:7]).normalized().matrix()
+        return math.atan2(R[1, 0], R[0, 0])
+
+    def leg_ik(self, k: int, p: np.ndarray) -> np.ndarray:
+        """Joint angles (HAA, HFE, KFE) of leg k putting its foot at p (base frame), exact for the
+        planar leg: HAA from the lateral offset, then the two-link planar inverse (law of cosines);
+        an unreachable point is clamped to the leg's reach."""
+        d = p - self.hip[k]
+        ly, l1, l2 = self.lateral[k], self.thigh[k], self.shank[k]
+        r2 = d[1] ** 2 + d[2] ** 2
+        zs = -math.sqrt(max(r2 - ly ** 2, 1e-12))
+        haa = math.atan2(d[2], d[1]) - math.atan2(zs, ly)
+        xs = d[0]
+        reach = math.hypot(xs, zs)
+        c = (reach ** 2 - l1 ** 2 - l2 ** 2) / (2 * l1 * l2)
+        kfe = self.knee_sign[k] * math.acos(min(1.0, max(-1.0, c)))
+        hfe = math.atan2(-xs, -zs) - math.atan2(l2 * math.sin(kfe), l1 + l2 * math.cos(kfe))
+        return np.array([haa, hfe, kfe])
+
+    def reset(self) -> None:
+        self.velocity = np.zeros(2)  # filtered horizontal base velocity (heading frame)
+        self.last_t = None
+        self.swing_from = self.nominal.copy()  # where each swing started (base frame)
+        self.stance_from = self.nominal.copy()  # where each stance started
+        self.stance_t0 = np.zeros(4)
+        self.in_stance = np.ones(4, dtype=bool)
+        self.swing_velocity = np.zeros((4, 2))  # each swing's starting velocity (base frame, x y)
+        self.last_targets = self.nominal.copy()  # (before the attitude correction)
+        self.previous_targets = None  # the joint targets of the last call
+
+    def command(self, t: float) -> float:
+        p = self.parameters
+        ramp = max(p["ramp"], 1e-9)
+        return p["speed"] * min(1.0, max(0.0, (t - p["start"]) / ramp))
+
+    def __call__(self, state: State, control) -> None:
+        p = self.parameters
+        q, v, t = state.q, state.v, float(state.t)
+        R = pin.Quaternion(q[3:7]).normalized().matrix()
+        yaw = math.atan2(R[1, 0], R[0, 0])
+        heading = _rot_z(yaw)
+        tilt = heading.T @ R  # the base's roll and pitch (in its heading frame)
+        roll, pitch = math.atan2(tilt[2, 1], tilt[2, 2]), -math.asin(max(-1.0, min(1.0, tilt[2, 0])))
+        v_heading = (heading.T @ (R @ v[:3]))[:2]
+        dt = 0.0 if self.last_t is None else max(0.0, t - self.last_t)
+        self.last_t = t
+        alpha = 1.0 if p["velocity_filter"] <= 0 else min(1.0, dt / p["velocity_filter"])
+        self.velocity += alpha * (v_heading - self.velocity)
+        v_cmd = self.command(t)
+
+        period, duty = p["period"], p["duty"]
+        t_stance, t_swing = duty * period, (1.0 - duty) * period
+        targets = self.nominal.copy()
+        load = np.ones(4)  # each foot's share of the weight (relative)
+        softness = np.ones(4)  # each leg's PD gains relative to the scene's
+        unload = np.ones(4)  # 1 until the weight starts moving off a stance foot, then down to 0 at lift-off
+        for k in range(4):
+            if t < p["start"]:  # standing on the initial posture
+                self.in_stance[k], self.stance_from[k], self.stance_t0[k] = True, self.nominal[k], t
+                continue
+            pair = 0 if k in self.PAIRS[0] else 1
+            phi = ((t - p["start"]) / period + 0.5 * pair) % 1.0  # 0: touchdown, duty: lift-off
+            stance = phi < duty
+            if stance and not self.in_stance[k]:  # touchdown: the stance starts where the swing ended
+                self.stance_from[k], self.stance_t0[k] = self.last_targets[k].copy(), t
+            if not stance and self.in_stance[k]:  # lift-off: the swing starts where the stance ended
+                self.swing_from[k] = self.last_targets[k].copy()
+                self.swing_velocity[k] = -self.velocity  # the ground's velocity seen from the base
+            self.in_stance[k] = stance
+            if stance:
+                targets[k] = self.stance_from[k].copy()
+                targets[k][0] -= v_cmd * (t - self.stance_t0[k])
+                # the weight moves onto a foot after touchdown and off it before lift-off
+                ramp = max(p["load_ramp"], 1e-9)
+                load[k] = min(1.0, (phi + 1e-9) / ramp, (duty - phi) / ramp)
+                unload[k] = min(1.0, (duty - phi) / ramp)
+                # before lift-off the leg softens with its load: a joint PD's force is not along its error
+                # (K = J^-T kp J^-1), so a stiff unloading leg pushes sideways as its normal force vanishes
+                softness[k] = max(p["liftoff_softness"], min(1.0, (duty - phi) / ramp))
+            else:
+                s = (phi - duty) / (1.0 - duty)
+                # swing: a cubic Hermite in s from the lift-off point to the landing point, leaving the ground
+                # at its velocity seen from the base and reaching it at the stance feet's (-v_cmd): no scuff,
+                # and a lift of sin(pi s)^lift_shape
+                h00, h10 = 2 * s ** 3 - 3 * s ** 2 + 1, s ** 3 - 2 * s ** 2 + s
+                h01, h11 = -2 * s ** 3 + 3 * s ** 2, s ** 3 - s ** 2
+                land = self._swing_end(k, v_cmd, t_stance)
+                targets[k] = h00 * self.swing_from[k] + h01 * land
+                targets[k][:2] += h10 * t_swing * self.swing_velocity[k]
+                targets[k][0] += h11 * (-v_cmd * t_swing)
+                targets[k][2] = self.nominal[k][2] + p["lift"] * math.sin(math.pi * s) ** p["lift_shape"]
+                load[k] = 0.0
+                softness[k] = p["swing_stiffness"] * max(p["liftoff_softness"],
+                                                         min(1.0, (phi - duty) / max(p["load_ramp"], 1e-9)))
+        # stance feet: only a part of the way from where they are to their sweep (a softer horizontal
+        # spring: the friction the stance needs stays well inside the cone), none of it at lift-off (but
+        # all of it from touchdown on: a target following the foot would not resist its sliding)
+        pin.forwardKinematics(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+        base = self.data.oMi[1]
+        for k in range(4):
+            if self.in_stance[k] and t >= p["start"]:
+                actual = base.actInv(self.data.oMf[self.feet[k]].translation)
+                gain = p["stance_stiffness"] * unload[k]
+                targets[k][:2] = actual[:2] + gain * (targets[k][:2] - actual[:2])
+        self.last_targets = targets.copy()  # (where a swing starts: the target the stance ended on)
+        # level the base: legs extend where the base dips (pitch > 0 is nose down: the front ones; roll > 0
+        # lifts the left side), every foot alike so that no target jumps at touchdown or lift-off
+        for k in range(4):
+            x, y = self.nominal[k][0], self.nominal[k][1]
+            targets[k][2] += p["attitude_gain"] * (-pitch * np.sign(x) + roll * np.sign(y))
+        # joint targets (the base frame of a level base: its tilt is what the stance legs correct)
+        q_target, v_target = control.q_target, control.v_target
+        for k in range(4):
+            q_target[self.iq[k]] = self.leg_ik(k, targets[k])
+        # the joint velocity of the targets (finite difference): the PD damps the error, not the motion
+        joints = q_target[self.iq].ravel()
+        if self.previous_targets is not None and dt > 0.0:
+            v_target[self.iv.ravel()] = (joints - self.previous_targets) / dt
+        else:
+            v_target[self.iv.ravel()] = 0.0
+        self.previous_targets = joints
+        kp, kd = control.kp, control.kd
+        for k in range(4):
+            kp[self.iv[k]] = self.scene.kp[self.iv[k]] * softness[k]
+            kd[self.iv[k]] = self.scene.kd[self.iv[k]] * softness[k]
+        tau = control.tau_ff
+        tau[:] = 0.0
+        if p["feedforward"] != 0.0 and load.sum() > 0.0:
+            # static equilibrium (as control.gravity_feedforward): tau = g(q) - J^T lambda, the legs' own
+            # weight and the stance feet's shares of the robot's (vertical forces: no sideways push)
+            tau[6:] = p["feedforward"] * pin.computeGeneralizedGravity(self.model, self.data, q)[6:]
+            pin.computeJointJacobians(self.model, self.data, q)
+            pin.updateFramePlacements(self.model, self.data)
+            shares = p["feedforward"] * self.weight * load / load.sum()
+            for k in np.flatnonzero(load > 0.0):
+                J = pin.getFrameJacobian(self.model, self.data, self.feet[k], pin.LOCAL_WORLD_ALIGNED)
+                tau[self.iv[k]] -= J[2, self.iv[k]] * shares[k]  # -J^T (0, 0, share)
+
+    def _swing_end(self, k: int, v_cmd: float, t_stance: float) -> np.ndarray:
+        """Raibert's landing point: half a stance's travel ahead of the nominal foot, plus a correction
+        proportional to the velocity error (forward and sideways)."""
+        p = self.parameters
+        out = self.nominal[k].copy()
+        out[0] += 0.5 * v_cmd * t_stance + p["raibert_gain"] * (self.velocity[0] - v_cmd)
+        out[1] += p["raibert_gain"] * self.velocity[1]
+        return out
+
+
+CONTROLLERS: dict[str, type] = {"trot": TrotController}
+
+
+def controller_class(name: str) -> type:
+    """A bundled controller by name, or ``"module:Class"`` imported from the Python path."""
+    if not isinstance(name, str):
+        raise SceneError(f"controller.name = {name!r}: must be a string")
+    if ":" not in name:
+        if name not in CONTROLLERS:
+            hint = did_you_mean(name, CONTROLLERS)
+            raise SceneError(f"controller.name = {name!r}: unknown controller ({hint}bundled: "
+                             f"{', '.join(CONTROLLERS)}; or \"module:Class\")")
+        return CONTROLLERS[name]
+    module_name, _, attr = name.partition(":")
+    if not module_name or not attr:
+        raise SceneError(f"controller.name = {name!r}: write \"module:Class\"")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise SceneError(f"controller.name = {name!r}: cannot import {module_name!r} ({exc})") from None
+    cls = getattr(module, attr, None)
+    if cls is None or not callable(cls):
+        raise SceneError(f"controller.name = {name!r}: {module_name!r} has no class {attr!r}")
+    return cls
+
+
+def build_controller(scene):
+    """The controller a scene names (its ``[controller]`` table), or None."""
+    cfg = (scene.config or {}).get("controller")
+    if not cfg:
+        return None
+    cls = controller_class(cfg["name"])
+    return cls(scene, **check_parameters(cls, cfg.get("parameters") or {}))
+
+
+class SimulatorLoop:
+    """The ``rollout(callback=...)`` of a stiction Simulator: the controller reads ``sim.data``'s
+    q, v, t and writes into its control views."""
+
+    def __init__(self, controller):
+        self.controller = controller
+
+    def __call__(self, sim) -> None:
+        d = sim.data
+        self.controller(State(d.q, d.v, d.t), d)
+
+
+# ---------------------------------------------------------------- the same controller on MuJoCo
+
+def stance_slip(tangential_speed: np.ndarray, in_contact: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """Per contact, the largest slip of its contact point during one stance, in m: the sum of
+    tangential speed times dt over each run of consecutive steps in contact, from the step after
+    its touchdown step (the impact step itself is left out). tangential_speed and in_contact are
+    (steps, contacts), the speed after each step; dt (steps,)."""
+    speed = np.asarray(tangential_speed, dtype=float)
+    touching = np.asarray(in_contact, dtype=bool)
+    dt = np.asarray(dt, dtype=float)
+    out = np.zeros(speed.shape[1])
+    for c in range(speed.shape[1]):
+        run = 0.0
+        for k in range(len(dt)):
+            if not touching[k, c]:
+                run = 0.0
+                continue
+            if k > 0 and touching[k - 1, c]:  # not the touchdown step
+                run += speed[k, c] * dt[k]
+                out[c] = max(out[c], run)
+    return out
+
+
+def distance_walked(q: np.ndarray) -> float:
+    """The base's displacement along its initial heading (m), first row of q to the last."""
+    yaw = TrotController._yaw(q[0])
+    return float((q[-1, :2] - q[0, :2]) @ np.array([math.cos(yaw), math.sin(yaw)]))
+
+
+class MujocoLoop:
+    """The controller driving the MuJoCo twin of a scene (``stiction.bench.mujoco_twins.mujoco_twin``):
+    before each ``mj_step`` it reads qpos, qvel as Pinocchio's (q, v) and writes its control into the
+    twin's PD actuators (force = kp ctrl + bias; ctrl = q_target, bias = (tau_ff + kd v_target,
+    -kp, -kd)). :meth:`run` records what the summaries compare."""
+
+    def __init__(self, scene, controller, twin=None):
+        from .bench import mujoco_twins  # noqa: PLC0415 - optional (MuJoCo)
+
+        import mujoco  # noqa: PLC0415
+
+        self.mj = mujoco
+        self.scene, self.controller = scene, controller
+        self.twin = twin if twin is not None else mujoco_twins.mujoco_twin(scene)
+        self.data = mujoco.MjData(self.twin.model)
+        model = scene.model
+        self.actuated = []  # (actuator id, idx_q, idx_v)
+        for j in range(1, model.njoints):
+            name = model.names[j]
+            aid = mujoco.mj_name2id(self.twin.model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+            if aid >= 0:
+                self.actuated.append((aid, model.joints[j].idx_q, model.joints[j].idx_v))
+        self.control = SimpleNamespace(tau_ff=scene.tau_ff.copy(), q_target=scene.q_target.copy(),
+                                       v_target=np.zeros(model.nv), kp=scene.kp.copy(), kd=scene.kd.copy())
+        self.reset()
+
+    def reset(self) -> None:
+        mj, twin = self.mj, self.twin
+        mj.mj_resetData(twin.model, self.data)
+        self.data.qpos[:] = twin.qpos(self.scene.q0)
+        self.data.qvel[:] = twin.qvel(self.scene.q0, self.scene.v0)
+        self.controller.reset()
+
+    def state(self) -> State:
+        """(q, v, t) in Pinocchio's coordinates (free joint: world linear velocity to the base frame)."""
+        d, twin = self.data, self.twin
+        q = twin.q_from_qpos(d.qpos, self.scene.model.nq)[0]
+        v = np.zeros(self.scene.model.nv)
+        for j in twin.joints:
+            if j.kind == "free":
+                rotation = (j.root * pin.XYZQUATToSE3(q[j.idx_q:j.idx_q + 7])).rotation
+                v[j.idx_v:j.idx_v + 3] = rotation.T @ d.qvel[j.dofadr:j.dofadr + 3]
+                v[j.idx_v + 3:j.idx_v + 6] = d.qvel[j.dofadr + 3:j.dofadr + 6]
+            else:
+                v[j.idx_v] = d.qvel[j.dofadr]
+        return State(q, v, float(d.time))
+
+    def apply(self) -> None:
+        m, d, c = self.twin.model, self.data, self.control
+        for aid, iq, iv in self.actuated:
+            m.actuator_gainprm[aid, 0] = c.kp[iv]
+            m.actuator_biasprm[aid, :3] = (c.tau_ff[iv] + c.kd[iv] * c.v_target[iv], -c.kp[iv], -c.kd[iv])
+            d.ctrl[aid] = c.q_target[iq]
+
+    def run(self, duration: float) -> dict:
+        """Steps for `duration` s with the controller before each: the base's q at every step, each
+        foot's contact state and its contact point's tangential speed after every step, and the wall
+        time (controller and mapping included)."""
+        import time  # noqa: PLC0415
+
+        mj, m, d = self.mj, self.twin.model, self.data
+        n = int(round(duration / m.opt.timestep))
+        geoms = list(self.twin.contact_geoms)
+        nc = len(geoms)
+        Q = np.zeros((n + 1, self.scene.model.nq))
+        speed = np.zeros((n, nc))
+        touching = np.zeros((n, nc), dtype=bool)
+        jp, jr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+        Q[0] = self.state().q
+        start = time.perf_counter()
+        for k in range(n):
+            self.controller(self.state(), self.control)
+            self.apply()
+            mj.mj_step(m, d)
+            for i in range(d.ncon):
+                con = d.contact[i]
+                for g in (con.geom1, con.geom2):
+                    if g in geoms:
+                        c = geoms.index(g)
+                        mj.mj_jac(m, d, jp, jr, con.pos, m.geom_bodyid[g])
+                        u = jp @ d.qvel
+                        normal = con.frame[:3]
+                        touching[k, c] = True
+                        speed[k, c] = float(np.linalg.norm(u - (u @ normal) * normal))
+            Q[k + 1] = self.twin.q_from_qpos(d.qpos, self.scene.model.nq)[0]
+        wall = time.perf_counter() - start
+        return {"q": Q, "tangential_speed": speed, "in_contact": touching, "dt": np.full(n, m.opt.timestep),
+                "wall_seconds": wall, "real_time_factor": n * m.opt.timestep / wall,
+                "distance_walked": distance_walked(Q),
+                "max_stance_slip": float(stance_slip(speed, touching, np.full(n, m.opt.timestep)).max())
+                if nc else 0.0}
