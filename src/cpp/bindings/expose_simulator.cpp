@@ -131,8 +131,8 @@ SimulatorData& dataOf(PyObject* self) {
 
 /// A control input's attribute: its view (get) and a checked whole assignment (set), as a C-level
 /// descriptor of the type (a getset, as a numpy or CPython attribute) rather than a Boost.Python
-/// property, whose call dispatch was a third of a control write from Python (issue 25, Solo-12, best
-/// of 15 x 20 000: reading the view 0.105 -> 0.066 us, assigning a float64 array 0.077 -> 0.039 us).
+/// property, whose call dispatch cost ~0.04 us of each read or assignment (issue 25, Solo-12, best of
+/// 15 x 20 000: reading the view 0.105 -> 0.066 us, assigning a float64 array 0.077 -> 0.039 us).
 template <Eigen::VectorXd JointControl::*member>
 struct ControlAttribute {
   static inline const char* name = nullptr;
