@@ -43,8 +43,8 @@ class MjcfMismatch(ValueError):
 class MjcfRobot:
     name: str
     model: pin.Model
-    visual_model: pin.GeometryModel
-    collision_model: pin.GeometryModel  # the geoms of moving bodies (the world's, e.g. a floor, left out)
+    visual_model: pin.GeometryModel  # both: the geoms of moving bodies (the world's, e.g. a floor, left out)
+    collision_model: pin.GeometryModel
     q0: np.ndarray  # the MJCF's qpos0 in Pinocchio's coordinates
     path: Path
     checked: bool  # compared with MuJoCo (False: MuJoCo is not installed)
@@ -142,10 +142,7 @@ def load_mjcf(path: str | os.PathLike, accept=(), check: bool = True) -> MjcfRob
         for j in range(model.njoints):
             inertia = model.inertias[j]
             model.inertias[j] = pin.Inertia(inertia.mass * scale, inertia.lever, inertia.inertia * scale)
-    kept = pin.GeometryModel()  # the world's geoms (a floor, walls) are left to the scene
-    for go in collision.geometryObjects:
-        if go.parentJoint != 0:
-            kept.addGeometryObject(go)
+    visual, kept = _moving(visual), _moving(collision)
     q0 = model.referenceConfigurations["qpos0"].copy() if "qpos0" in [k.key() for k in model.referenceConfigurations] \
         else pin.neutral(model)
     robot = MjcfRobot(path.stem, model, visual, kept, q0, path, checked=False, total_mass_scale=scale)
@@ -169,6 +166,16 @@ def load_mjcf(path: str | os.PathLike, accept=(), check: bool = True) -> MjcfRob
             raise MjcfMismatch(f"mjcf_accept: {path.name} shows no {name!r} difference from MuJoCo; remove it")
     robot.checked, robot.differences = True, found
     return robot
+
+
+def _moving(geometry: pin.GeometryModel) -> pin.GeometryModel:
+    """The geoms of moving bodies: the world's (a floor, walls: unbounded planes) are left to the
+    scene, which has its own ground."""
+    kept = pin.GeometryModel()
+    for go in geometry.geometryObjects:
+        if go.parentJoint != 0:
+            kept.addGeometryObject(go)
+    return kept
 
 
 def _mujoco_to_pinocchio_q(mj, qpos: np.ndarray) -> np.ndarray:
