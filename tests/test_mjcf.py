@@ -324,3 +324,20 @@ def test_hopper_topples_and_comes_to_rest_on_its_back():
     assert np.abs(traj.v[-1]).max() < 1e-5
     touching = {sim.scene.contacts[i].name.split("@")[0] for i in np.flatnonzero(traj.lam[-1, :, 2] > 1e-9)}
     assert "torso" in touching
+
+
+def test_bundled_files_ship_with_their_licence():
+    """The dm_control files are installed with robots/ (CMake installs the whole folder as package
+    data) beside dm_control's Apache-2.0 licence and a README saying where they come from."""
+    from pathlib import Path
+
+    folder = bundled("walker").parent
+    for name in BUNDLED:
+        assert bundled(name).is_file()
+    assert "Apache License" in (folder / "LICENSE").read_text()
+    readme = (folder / "README.md").read_text()
+    assert "dm-control` 1.0.52" in readme and "Apache License, Version 2.0" in readme
+    for include in ("materials", "skybox", "visual"):
+        assert (folder / "common" / f"{include}.xml").is_file()
+    cmake = (Path(__file__).resolve().parents[1] / "CMakeLists.txt").read_text()
+    assert "install(DIRECTORY robots/ DESTINATION stiction/data/robots)" in cmake

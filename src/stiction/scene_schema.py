@@ -400,8 +400,8 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
             raise SceneError("free_flyer: an `mjcf` scene's root joint is the MJCF file's own (a <freejoint>, or "
                              "the slides and hinges of its top body)")
         if out["objects"] and not robot_scene:
-            raise SceneError("objects: free boxes are added to `robot`, `urdf` or `mjcf` scenes (`bodies` and "
-                             "[array] scenes are boxes already)")
+            raise SceneError("objects: free boxes are added to `robot` or `urdf` scenes (and `mjcf` ones; `bodies` "
+                             "and [array] scenes are boxes already)")
         names = [o["name"] for o in out["objects"]]
         if len(set(names)) != len(names):
             raise SceneError(f"objects: names must be unique, got {names}")
