@@ -14,11 +14,11 @@ from pathlib import Path
 import mujoco
 import pinocchio as pin
 
-from stiction.mjcf import MjcfMismatch, compare_with_mujoco, load_mjcf, total_mass
+from stiction.mjcf import MjcfMismatch, compare_with_mujoco, load_mjcf, mujoco_model, total_mass
 
 
 def row(path: Path) -> str:
-    mj = mujoco.MjModel.from_xml_path(str(path))
+    mj = mujoco_model(path)
     mujoco_text = f"{mj.nq} / {mj.nv} / {sum(mj.body_mass):.4g}"
     try:
         robot = load_mjcf(path, check=False)

@@ -30,9 +30,7 @@ def bundled(name: str):
 
 
 def mujoco_model(path):
-    import mujoco
-
-    return mujoco.MjModel.from_xml_path(str(path))
+    return mjcf.mujoco_model(path)  # from_xml_path, its compiler warnings caught (no MUJOCO_LOG.TXT)
 
 
 def total_mass(model) -> float:
@@ -341,3 +339,31 @@ def test_bundled_files_ship_with_their_licence():
         assert (folder / "common" / f"{include}.xml").is_file()
     cmake = (Path(__file__).resolve().parents[1] / "CMakeLists.txt").read_text()
     assert "install(DIRECTORY robots/ DESTINATION stiction/data/robots)" in cmake
+
+
+def test_mjcf_capsules_through_coal_carry_the_walker():
+    """[collision] pairs among the MJCF's own geoms and "ground": the walker's foot capsules
+    through coal (two contact points each, patches) carry its weight, as the end spheres do."""
+    cfg = {"mjcf": "mjcf/dm_control/walker.xml", "duration": 2.0, "settle_time": 1.0, "ground": {"mu": 1.0},
+           "control": {"kp": 200.0, "kd": 5.0},
+           "collision": {"pairs": [["right_foot", "ground"], ["left_foot", "ground"]], "max_contacts": 2,
+                         "patch": True}}
+    scene = build_scene(cfg)
+    assert [gp.name for gp in scene.pairs] == ["right_foot|ground", "left_foot|ground"] and not scene.contacts
+    sim = Simulator(scene)
+    traj = sim.rollout()
+    m = pin.computeTotalMass(scene.model)
+    assert traj.converged[1:].all() and -traj.gaps[1:].min() < 1e-9
+    assert abs(traj.lam[-1, :, 2].sum() - m * G) <= 1e-6 * m * G
+    assert (traj.states[-1] == 1).all() and len(traj.contact_names) == 4  # both ends of both feet, sticking
+    with pytest.raises(SceneError, match="collision.pairs\\[0\\]: no geometry 'floor'"):
+        build_scene({**cfg, "collision": {"pairs": [["floor", "right_foot"]]}})  # the world's geoms are left out
+
+
+@needs_mujoco
+def test_the_check_writes_no_mujoco_log(tmp_path, monkeypatch):
+    """MuJoCo's compiler warns that settotalmass is deprecated (cheetah) by appending to
+    MUJOCO_LOG.TXT in the working folder; the loader catches it instead."""
+    monkeypatch.chdir(tmp_path)
+    robot = mjcf.load_mjcf(bundled("cheetah"))
+    assert robot.checked and not (tmp_path / "MUJOCO_LOG.TXT").exists()

@@ -189,13 +189,32 @@ def _mujoco_to_pinocchio_q(mj, qpos: np.ndarray) -> np.ndarray:
     return q
 
 
+def mujoco_model(path: str | os.PathLike):
+    """``mujoco.MjModel.from_xml_path(path)`` with MuJoCo's compiler warnings caught instead of
+    appended to MUJOCO_LOG.TXT in the working folder: the deprecation of ``settotalmass`` (which
+    the loader applies itself) is dropped, any other warning is a Python warning."""
+    import warnings
+
+    import mujoco
+
+    caught: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(caught.append)
+    try:
+        model = mujoco.MjModel.from_xml_path(str(path))
+    finally:
+        mujoco.set_mju_user_warning(previous)
+    for message in caught:
+        if "settotalmass" not in message:
+            warnings.warn(f"MuJoCo on {Path(path).name}: {message}", stacklevel=2)
+    return model
+
+
 def compare_with_mujoco(model: pin.Model, path: str | os.PathLike, tolerance: float = TOLERANCE) -> dict[str, str]:
     """The differences between `model` and ``mujoco.MjModel.from_xml_path(path)``: a dict
     {name in DIFFERENCES: one-line description}, empty when they agree to `tolerance`
     (relative for masses and M). Once nq or nv differ, the later checks are not made."""
-    import mujoco
-
-    mj = mujoco.MjModel.from_xml_path(str(path))
+    mj = mujoco_model(path)
     out: dict[str, str] = {}
     if model.nq != mj.nq:
         out["nq"] = f"nq {model.nq} against MuJoCo's {mj.nq}"
