@@ -259,6 +259,11 @@ def test_scene_keys_are_checked():
         build_scene({**walker, "contacts": {"geoms": ["rigth_foot"]}})
     with pytest.raises(FileNotFoundError, match="MJCF .nowhere.xml. not found"):
         build_scene({"mjcf": "nowhere.xml"})
+    with pytest.raises(SceneError, match="control.lock_joints: Pinocchio cannot reduce this MJCF model"):
+        build_scene({"mjcf": "mjcf/dm_control/humanoid.xml", "control": {"lock_joints": True}})
+    with pytest.raises(SceneError, match="planar.*joint 'root_joint_box' moves out of it"):  # a free box beside it
+        build_scene({**walker, "contacts": {"geoms": ["*_foot"], "model": "planar"},
+                     "objects": [{"name": "box", "xy": [1.0, 0.0]}]})
     with pytest.raises(SceneError, match="planar.*joint 'root' moves out of it"):
         build_scene({"mjcf": "mjcf/dm_control/humanoid.xml", "contacts": {"geoms": ["*_foot"], "model": "planar"}})
 

@@ -266,8 +266,12 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             # A rigid robot: every joint but the free flyer held at its initial value.
             lock = list(range(2, model.njoints))
             if mjcf_robot is not None:  # its collision geoms too (they name the reduced model's frames)
-                model, (visual, mjcf_collision) = pin.buildReducedModel(model, [visual, mjcf_robot.collision_model],
-                                                                        lock, q0)
+                try:
+                    model, (visual, mjcf_collision) = pin.buildReducedModel(
+                        model, [visual, mjcf_robot.collision_model], lock, q0)
+                except ValueError as exc:  # e.g. a body and a site of one name: two frames Pinocchio cannot tell
+                    raise SceneError(f"control.lock_joints: Pinocchio cannot reduce this MJCF model "
+                                     f"({str(exc).strip().splitlines()[-1]})") from None
                 mjcf_robot = dataclasses.replace(mjcf_robot, model=model, collision_model=mjcf_collision)
             else:
                 model, visual = pin.buildReducedModel(model, visual, lock, q0)
@@ -396,7 +400,7 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
     slid_root = (mjcf_robot is not None and model.njoints > 1 and model.parents[1] == 0
                  and model.joints[1].shortname() == "JointModelComposite")
     if mjcf_robot is not None and any(c.model == _core.ContactModel.planar for c in contacts):
-        _check_planar_motion(model, q0, contacts, robot_nv)
+        _check_planar_motion(model, q0)
     for key in ("base_velocity", "base_xy"):
         if initial[key] is not None and not free:
             raise SceneError(f"initial.{key}: the model has no free-flyer base" +
@@ -522,18 +526,16 @@ def _vertical_coordinate(model: pin.Model, q: np.ndarray) -> int | None:
     return None
 
 
-def _check_planar_motion(model: pin.Model, q: np.ndarray, contacts: list, robot_nv: int) -> None:
-    """Planar contacts (rows t1 = x, n: none across the plane) on an `mjcf` robot: it must move in
-    the world's x-z plane only (every robot joint's motion has no y velocity, no x or z rotation
-    at q), else friction across the plane would be missing."""
+def _check_planar_motion(model: pin.Model, q: np.ndarray) -> None:
+    """Planar contacts (rows t1 = x, n: none across the plane) in an `mjcf` scene: everything must
+    move in the world's x-z plane only (no joint's motion has a y velocity or an x or z rotation at
+    q; a free object's does), else friction across the plane would be missing."""
     data = model.createData()
     pin.computeJointJacobians(model, data, q)
     for j in range(1, model.njoints):
-        if model.joints[j].idx_v >= robot_nv:
-            continue
-        J = pin.getJointJacobian(model, data, j, pin.ReferenceFrame.WORLD)[:, :robot_nv]
+        J = pin.getJointJacobian(model, data, j, pin.ReferenceFrame.WORLD)
         if np.max(np.abs(J[[1, 3, 5], :])) > 1e-12:
-            raise SceneError(f"contacts.model = \"planar\": the robot does not move in the world's x-z plane only "
+            raise SceneError(f"contacts.model = \"planar\": the scene does not move in the world's x-z plane only "
                              f"(joint {model.names[j]!r} moves out of it); use spatial contacts")
 
 

@@ -218,8 +218,8 @@ ARRAY = Table("array", "An array of free bodies (instead of `robot`, `urdf` or `
     Key("seed", "int", "pile: the random seed of the bodies' kinds, positions and orientations", 0, low=0),
 ))
 
-SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `mjcf`, `bodies` or `[array]`, the ground, contacts, control, "
-              "the initial state.", (
+SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `mjcf`, `bodies` or `[array]`, the ground, contacts, "
+              "control, the initial state.", (
     Key("name", "str", "scene name (default: the file name)"),
     Key("description", "str", "one line shown by `stiction scenes`", ""),
     Key("robot", "str", "a bundled robot (stiction.robots.ROBOTS)"),
