@@ -27,7 +27,10 @@ STEPS = 300
 STRICT = 1e-9  # relative, while the contact modes agree
 LOOSE = 1e-6   # relative, the whole run (after a mode switch: the scene's own sensitivity to rounding)
 # the last step compared strictly where a contact mode switch comes first (see the module's docstring)
-STRICT_UNTIL = {"ur5-push-box": 84, "pile-24": 230}
+# dmc-humanoid-stand: eight coplanar foot spheres carry the weight, a split that is not unique; from step
+# 46 the passes' rounding picks different splits (a sphere carrying 1.3 N in one is open in the other)
+# with the same motion (v within 2e-10 over the 300 steps)
+STRICT_UNTIL = {"ur5-push-box": 84, "pile-24": 230, "dmc-humanoid-stand": 45}
 
 
 def relative_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:

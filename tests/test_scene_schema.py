@@ -54,7 +54,7 @@ BAD_SCENES = [
     (with_(CUBE, initial={"q": [0, 0, 0.5, 0, 0, 1]}), ["initial.q", "nq = 7"]),
     (with_(CUBE, initial={"base_velocity": [1, 0, 0]}), ["initial.base_velocity", "6 entries"]),
     (with_(CUBE, robot="solo12"), ["exactly one", "robot", "urdf"]),
-    ({"duration": 1.0}, ["exactly one of `robot`, `urdf`, `bodies` or `[array]`"]),
+    ({"duration": 1.0}, ["exactly one of `robot`, `urdf`, `mjcf`, `bodies` or `[array]`"]),
     ({"array": {"layout": "grid"}}, ["missing required key 'count'"]),
     ({"array": {"layout": "ring", "count": 2}}, ["ring"]),
     ({"array": {"layout": "tower", "count": 2, "spacing": 0.3}}, ["spacing applies to layout = \"grid\" or \"pile\" only"]),

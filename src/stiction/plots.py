@@ -26,6 +26,12 @@ def plot_trajectory(sim, traj, path: str | os.PathLike) -> None:
             ax.plot(t, traj.q[:, k] - traj.q[0, k], label=f"base {label} - {label}0")
         ax.set_ylabel("base displacement [m]")
         ax.legend(loc="best", fontsize=8)
+    elif scene.model.njoints > 1 and scene.model.joints[1].shortname() == "JointModelComposite":
+        # an MJCF root of slides and hinges (rootx, rootz, rooty): its coordinates
+        for k in range(scene.model.joints[1].nq):
+            ax.plot(t, traj.q[:, k] - traj.q[0, k], label=f"root q[{k}] - q0[{k}]")
+        ax.set_ylabel("root coordinates [m, rad]")
+        ax.legend(loc="best", fontsize=8)
     ax.set_title(f"{scene.name}: {scene.description[:90]}", fontsize=9)
 
     ax = axes[1]

@@ -13,6 +13,7 @@ robot), ``urdf`` (a URDF path) or ``bodies`` (stacked boxes); ``[ground]`` slope
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import tomllib
@@ -87,15 +88,15 @@ def scene_description(name: str) -> str:
         return str(tomllib.load(fh).get("description", ""))
 
 
-def _resolve(path: str, base_dir=None) -> Path:
-    """A URDF path: absolute, relative to the scene file's folder, or a bundled URDF."""
+def _resolve(path: str, base_dir=None, what: str = "URDF") -> Path:
+    """A URDF (or MJCF) path: absolute, relative to the scene file's folder, or a bundled file."""
     p = Path(path)
     candidates = [p] if p.is_absolute() else ([Path(base_dir) / p] if base_dir is not None else []) + \
         [bundled_robots_dir() / p, p]
     for candidate in candidates:
         if candidate.is_file():
             return candidate
-    raise FileNotFoundError(f"URDF {path!r} not found (looked in: {', '.join(str(c.parent) for c in candidates)})")
+    raise FileNotFoundError(f"{what} {path!r} not found (looked in: {', '.join(str(c.parent) for c in candidates)})")
 
 
 def _package_dirs(urdf: Path) -> list[str]:
@@ -228,9 +229,17 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
     halfspaces = [_halfspace("ground", (0, 0, 1), 0.0)]
     contacts: list = []
     urdf_path = None
+    mjcf_robot = None
     pile_geometry = pile_pairs = None
-    if cfg["robot"] is not None or cfg["urdf"] is not None:
-        if cfg["robot"] is not None:
+    if cfg["robot"] is not None or cfg["urdf"] is not None or cfg["mjcf"] is not None:
+        if cfg["mjcf"] is not None:
+            from .mjcf import MjcfMismatch, load_mjcf
+
+            try:
+                robot = mjcf_robot = load_mjcf(_resolve(cfg["mjcf"], base_dir, "MJCF"), cfg["mjcf_accept"])
+            except MjcfMismatch as exc:
+                raise SceneError(f"mjcf = {cfg['mjcf']!r}: {exc}") from None
+        elif cfg["robot"] is not None:
             from .robots import ROBOTS
 
             if cfg["robot"] not in ROBOTS:
@@ -242,7 +251,7 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             urdf_path = _resolve(cfg["urdf"], base_dir)
             robot = load_urdf(urdf_path, root == "free_flyer", _package_dirs(urdf_path), planar=root == "planar")
         model, visual, q0 = robot.model, robot.visual_model, robot.q0.copy()
-        spec = robot.spec
+        spec = None if mjcf_robot is not None else robot.spec
         if initial["q"] is not None:
             q0 = np.asarray(initial["q"], dtype=float)
             if q0.shape != (model.nq,):
@@ -256,7 +265,16 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
         if control["lock_joints"] and model.njoints > 2:
             # A rigid robot: every joint but the free flyer held at its initial value.
             lock = list(range(2, model.njoints))
-            model, visual = pin.buildReducedModel(model, visual, lock, q0)
+            if mjcf_robot is not None:  # its collision geoms too (they name the reduced model's frames)
+                try:
+                    model, (visual, mjcf_collision) = pin.buildReducedModel(
+                        model, [visual, mjcf_robot.collision_model], lock, q0)
+                except ValueError as exc:  # e.g. a body and a site of one name: two frames Pinocchio cannot tell
+                    raise SceneError(f"control.lock_joints: Pinocchio cannot reduce this MJCF model "
+                                     f"({str(exc).strip().splitlines()[-1]})") from None
+                mjcf_robot = dataclasses.replace(mjcf_robot, model=model, collision_model=mjcf_collision)
+            else:
+                model, visual = pin.buildReducedModel(model, visual, lock, q0)
             q0 = q0[:model.nq].copy()  # the root joint's coordinates come first
         feet = contacts_cfg["feet"] if contacts_cfg["feet"] is not None else (spec is not None and bool(spec.feet))
         if feet:
@@ -265,6 +283,15 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             radius = contacts_cfg["radius"] if contacts_cfg["radius"] is not None else spec.foot_radius
             for f in spec.feet:
                 contacts.append(_sphere(f, model.getFrameId(f), (0, 0, 0), radius, 0, mu, cmodel))
+        if contacts_cfg["geoms"]:
+            from .mjcf import geom_spheres
+
+            try:
+                spheres = geom_spheres(model, mjcf_robot.collision_model, contacts_cfg["geoms"])
+            except ValueError as exc:
+                raise SceneError(str(exc)) from None
+            for sp in spheres:
+                contacts.append(_sphere(sp.name, sp.frame, sp.offset, sp.radius, 0, mu, cmodel))
         for frame_name in contacts_cfg["frames"]:
             contacts.append(_sphere(frame_name, _frame_id(model, frame_name, "contacts.frames"), (0, 0, 0),
                                     contacts_cfg["radius"] or 0.0, 0, mu, cmodel))
@@ -340,7 +367,8 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             raise SceneError("collision: a pile makes its own pairs (every two bodies); it takes no [collision]")
         geometry, pairs = pile_geometry, pile_pairs
     elif cfg["collision"]["pairs"] is not None:
-        geometry, pairs = _collision_pairs(cfg, model, mu, urdf_path)
+        geometry, pairs = _collision_pairs(cfg, model, mu, urdf_path,
+                                           mjcf_robot.collision_model if mjcf_robot is not None else None)
     elif cfg["collision"]["boxes"] or cfg["collision"]["mu"] is not None:
         raise SceneError("collision: boxes or mu without pairs do nothing; list the pairs")
 
@@ -367,6 +395,12 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
     free = model.joints[1].shortname() == "JointModelFreeFlyer" if model.njoints > 1 else False
     planar = model.njoints > 1 and model.joints[1].shortname() == "JointModelPlanar"
     bodies = cfg["bodies"] is not None or cfg["array"] is not None
+    # An MJCF top body's own slides and hinges (dm_control's planar walkers: rootx, rootz, rooty), one
+    # composite joint in Pinocchio: an unactuated root like a free flyer's.
+    slid_root = (mjcf_robot is not None and model.njoints > 1 and model.parents[1] == 0
+                 and model.joints[1].shortname() == "JointModelComposite")
+    if mjcf_robot is not None and any(c.model == _core.ContactModel.planar for c in contacts):
+        _check_planar_motion(model, q0)
     for key in ("base_velocity", "base_xy"):
         if initial[key] is not None and not free:
             raise SceneError(f"initial.{key}: the model has no free-flyer base" +
@@ -400,6 +434,12 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             v0[-6:] = initial["top_velocity"]
         if initial["base_velocity"] is not None:
             v0[:6] = initial["base_velocity"]
+    elif slid_root and not anchors:
+        if initial["q"] is None:  # lower (or raise) it along its vertical slide so its lowest contact touches
+            iz = _vertical_coordinate(model, q0)
+            lowest = _lowest_contact(model, q0, contacts, geometry, pairs)
+            if iz is not None and math.isfinite(lowest):
+                q0[iz] += -lowest + initial["drop"]
     elif planar and not anchors:
         if initial["q"] is None:  # lower (or raise) the body so its lowest contact touches z = 0, plus `drop`
             data = model.createData()
@@ -417,8 +457,8 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
 
     kp = np.zeros(model.nv)
     kd = np.zeros(model.nv)
-    start = 6 if free else 3 if planar else 0
-    root_nq = 7 if free else 4 if planar else 0
+    start = 6 if free else 3 if planar else model.joints[1].nv if slid_root else 0
+    root_nq = 7 if free else 4 if planar else model.joints[1].nq if slid_root else 0
     kp[start:robot_nv] = control["kp"]  # the robot's joints (objects are not actuated)
     kd[start:robot_nv] = control["kd"]
     _per_joint_gains(model, control["gains"], start, robot_nv, kp, kd)
@@ -436,6 +476,9 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
                 raise SceneError("control.gravity_feedforward: a free-flyer robot stands on its sphere/point contacts; "
                                  "the [collision] pairs' contact points are not known before the step")
             tau_ff = standing_feedforward(model, q_target, contacts, halfspaces, robot_nv)
+        elif slid_root:
+            raise SceneError("control.gravity_feedforward: not for a robot on an unactuated root of slides and "
+                             "hinges (its weight rests on its contacts); use the PD alone")
         else:
             tau_ff = pin.computeGeneralizedGravity(model, model.createData(), q_target).copy()
         tau_ff[:start] = 0.0
@@ -448,6 +491,52 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
         duration=cfg["duration"], dt=cfg["dt"], settle_time=cfg["settle_time"],
         mode=cfg["mode"], delta=cfg["delta"], zeta=cfg["zeta"],
         slope_deg=slope_deg, mu=mu, config=cfg)
+
+
+def _lowest_contact(model: pin.Model, q: np.ndarray, contacts: list, geometry, pairs: list) -> float:
+    """The lowest gap to the ground z = 0 at q: of the sphere/point contacts on it and of the coal
+    pairs with "ground" (inf when there is none)."""
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    lowest = min((data.oMf[c.frame].act(c.offset)[2] - c.radius for c in contacts if c.halfspace == 0),
+                 default=math.inf)
+    if geometry is not None:
+        gdata = geometry.createData()
+        pin.updateGeometryPlacements(model, data, geometry, gdata)
+        for gp in pairs:
+            cp = geometry.collisionPairs[gp.pair]
+            if "ground" in (geometry.geometryObjects[cp.first].name, geometry.geometryObjects[cp.second].name):
+                lowest = min(lowest, pin.computeDistance(geometry, gdata, gp.pair).min_distance)
+    return float(lowest)
+
+
+def _vertical_coordinate(model: pin.Model, q: np.ndarray) -> int | None:
+    """The coordinate of the root joint that translates its body straight up (a slide along world
+    z: raising it by 1 moves the body by (0, 0, 1) without turning it), or None."""
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    before = data.oMi[1].copy()
+    for i in range(model.joints[1].idx_q, model.joints[1].idx_q + model.joints[1].nq):
+        moved = q.copy()
+        moved[i] += 1.0
+        pin.forwardKinematics(model, data, moved)
+        if (np.allclose(data.oMi[1].translation - before.translation, [0.0, 0.0, 1.0], atol=1e-12)
+                and np.allclose(data.oMi[1].rotation, before.rotation, atol=1e-12)):
+            return i
+    return None
+
+
+def _check_planar_motion(model: pin.Model, q: np.ndarray) -> None:
+    """Planar contacts (rows t1 = x, n: none across the plane) in an `mjcf` scene: everything must
+    move in the world's x-z plane only (no joint's motion has a y velocity or an x or z rotation at
+    q; a free object's does), else friction across the plane would be missing."""
+    data = model.createData()
+    pin.computeJointJacobians(model, data, q)
+    for j in range(1, model.njoints):
+        J = pin.getJointJacobian(model, data, j, pin.ReferenceFrame.WORLD)
+        if np.max(np.abs(J[[1, 3, 5], :])) > 1e-12:
+            raise SceneError(f"contacts.model = \"planar\": the scene does not move in the world's x-z plane only "
+                             f"(joint {model.names[j]!r} moves out of it); use spatial contacts")
 
 
 def _named_joint_positions(model: pin.Model, q: np.ndarray, joints: dict, explicit_q: bool) -> np.ndarray:
@@ -600,21 +689,26 @@ def _frame_id(model: pin.Model, name: str, field: str) -> int:
     return model.getFrameId(name)
 
 
-def _collision_pairs(cfg: dict, model: pin.Model, mu: float, urdf_path: Path | None):
-    """The coal geometry model and pairs of the [collision] table."""
+def _collision_pairs(cfg: dict, model: pin.Model, mu: float, urdf_path: Path | None,
+                     mjcf_collision: pin.GeometryModel | None = None):
+    """The coal geometry model and pairs of the [collision] table (an `mjcf` scene: among the
+    MJCF's geoms of moving bodies)."""
     import coal
 
     col = cfg["collision"]
-    if cfg["robot"] is not None:
+    if mjcf_collision is not None:
+        geometry = mjcf_collision.copy()
+    elif cfg["robot"] is not None:
         from .robots import ROBOTS, robots_dir
 
         urdf, package_dirs = robots_dir() / ROBOTS[cfg["robot"]].urdf, robot_package_dirs()
     elif urdf_path is not None:
         urdf, package_dirs = urdf_path, _package_dirs(urdf_path)
     else:
-        raise SceneError("collision: needs a `robot` or `urdf` scene")
-    # the mesh search paths matter: a bundled robot's collision meshes are package:// URIs
-    geometry = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION, package_dirs=package_dirs)
+        raise SceneError("collision: needs a `robot`, `urdf` or `mjcf` scene")
+    if mjcf_collision is None:
+        # the mesh search paths matter: a bundled robot's collision meshes are package:// URIs
+        geometry = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION, package_dirs=package_dirs)
     geometry.addGeometryObject(pin.GeometryObject("ground", 0, pin.SE3.Identity(),
                                                   coal.Halfspace(np.array([0.0, 0.0, 1.0]), 0.0)))
     for k, box in enumerate(col["boxes"]):

@@ -82,6 +82,9 @@ CONTACTS = Table("contacts", "Which points of the robot touch the ground (analyt
         "0 for frames)", low=0.0),
     Key("frames", "strings", "extra frames carrying a contact sphere of `radius`", ()),
     Key("soles", "bool", "the sole corner points of a bundled humanoid", True),
+    Key("geoms", "strings", "`mjcf` scenes: the MJCF's sphere and capsule geoms (names or fnmatch patterns) that "
+        "touch the ground as contact spheres: a sphere geom is one, a capsule the two at the ends of its axis (exact "
+        "against a plane)", ()),
     Key("box_corners", "bool", "the 8 corners of the URDF's box visual as contact points (`joint = \"planar\"`: "
         "the 4 corners in the joint's plane)", False),
     Key("model", "str", _MODEL_DOC, "spatial", choices=CONTACT_MODELS),
@@ -224,12 +227,17 @@ CONTROLLER = Table("controller", "A controller run before every step by `Simulat
         "default: the controller's defaults)"),
 ))
 
-SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `bodies` or `[array]`, the ground, contacts, control, "
-              "the initial state.", (
+SCENE = Table("scene", "A scene: exactly one of `robot`, `urdf`, `mjcf`, `bodies` or `[array]`, the ground, contacts, "
+              "control, the initial state.", (
     Key("name", "str", "scene name (default: the file name)"),
     Key("description", "str", "one line shown by `stiction scenes`", ""),
     Key("robot", "str", "a bundled robot (stiction.robots.ROBOTS)"),
     Key("urdf", "str", "a URDF path (relative: to the scene file's folder, then the bundled robots)"),
+    Key("mjcf", "str", "an MJCF (MuJoCo XML) path, loaded with Pinocchio's MJCF parser (relative: to the scene "
+        "file's folder, then the bundled robots, e.g. \"mjcf/dm_control/hopper.xml\"); the file defines the root "
+        "joint. Checked against MuJoCo's model of the same file when MuJoCo is installed (docs/mjcf.md)"),
+    Key("mjcf_accept", "strings", "`mjcf`: differences from MuJoCo's model to accept by name (nq, nv, total_mass, "
+        "joint_range, mass_matrix); any other difference is an error, and so is a name the model does not show", ()),
     Key("free_flyer", "bool", "`urdf`: a free-flyer root joint", True),
     Key("joint", "str", "`urdf`: the root joint (default: free_flyer, or fixed when free_flyer = false). planar: "
         "Pinocchio's planar joint (x, y, rotation about z) placed in the world's vertical x-z plane (joint x = "
@@ -376,9 +384,9 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
     filled in. Raises SceneError (a ValueError) with one line naming the file, field and value."""
     try:
         out = _validate_table(SCENE, cfg, "")
-        given = [k for k in ("robot", "urdf", "bodies", "array") if k in cfg]
+        given = [k for k in ("robot", "urdf", "mjcf", "bodies", "array") if k in cfg]
         if len(given) != 1:
-            raise SceneError("a scene needs exactly one of `robot`, `urdf`, `bodies` or `[array]`" +
+            raise SceneError("a scene needs exactly one of `robot`, `urdf`, `mjcf`, `bodies` or `[array]`" +
                              (f", got {', '.join(given)}" if given else ""))
         if "controller" not in cfg:
             out["controller"] = None
@@ -395,16 +403,25 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
                     raise SceneError(f"array.{key} applies to layout = \"pile\" only")
             if layout == "pile" and "urdf" in cfg["array"]:
                 raise SceneError("array.urdf: a pile draws its bodies from `urdfs`")
-        if out["objects"] and out["robot"] is None and out["urdf"] is None:
-            raise SceneError("objects: free boxes are added to `robot` or `urdf` scenes (`bodies` and [array] scenes "
-                             "are boxes already)")
+        robot_scene = any(out[k] is not None for k in ("robot", "urdf", "mjcf"))
+        if out["mjcf"] is None:
+            if "mjcf_accept" in cfg:
+                raise SceneError("mjcf_accept applies to `mjcf` scenes only")
+            if out["contacts"]["geoms"]:
+                raise SceneError("contacts.geoms applies to `mjcf` scenes only (the MJCF's geoms)")
+        elif "free_flyer" in cfg:
+            raise SceneError("free_flyer: an `mjcf` scene's root joint is the MJCF file's own (a <freejoint>, or "
+                             "the slides and hinges of its top body)")
+        if out["objects"] and not robot_scene:
+            raise SceneError("objects: free boxes are added to `robot` or `urdf` scenes (and `mjcf` ones; `bodies` "
+                             "and [array] scenes are boxes already)")
         names = [o["name"] for o in out["objects"]]
         if len(set(names)) != len(names):
             raise SceneError(f"objects: names must be unique, got {names}")
         if out["settle_time"] >= out["duration"]:
             raise SceneError(f"settle_time = {out['settle_time']:g} must be shorter than duration = "
                              f"{out['duration']:g} (drift and slip are measured after settling)")
-        planar_root = out["joint"] == "planar"
+        planar_root = out["joint"] == "planar" or out["mjcf"] is not None  # (mjcf: checked on the model)
         for label, model in [("contacts.model", out["contacts"]["model"])] + \
                 [(f"walls[{i}].model", w["model"]) for i, w in enumerate(out["walls"])]:
             if model == "planar" and not planar_root:
@@ -426,8 +443,8 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
                 raise SceneError(f"joints.override[{i}]: give at least one of lower, upper, friction, damping, effort")
             if o["lower"] is not None and o["upper"] is not None and o["lower"] > o["upper"]:
                 raise SceneError(f"joints.override[{i}]: lower = {o['lower']:g} is above upper = {o['upper']:g}")
-        if out["joints"]["override"] and out["robot"] is None and out["urdf"] is None:
-            raise SceneError("joints.override applies to `robot` and `urdf` scenes (the bodies of the others have no "
+        if out["joints"]["override"] and not robot_scene:
+            raise SceneError("joints.override applies to `robot`, `urdf` and `mjcf` scenes (the bodies of the others have no "
                              "joints)")
         for i, a in enumerate(out["anchors"]):
             if a["target"] is not None and a["frame2"] is not None:
