@@ -191,3 +191,14 @@ def test_absurd_step_counts_are_refused_before_simulating():
         sim.rollout(1.0)
     with pytest.raises(ValueError, match="GB; record less often"):
         Simulator("solo12-stand", dt=1e-7).rollout(10.0)
+
+
+@pytest.mark.parametrize("scene", ["solo12-stand", "pile-24", "pinch", "ur5-joint-limit"])
+def test_the_recording_size_guard_counts_every_recorded_array(scene):
+    # the guard's estimate must not undercount what a rollout records (the sensors added arrays)
+    sim = Simulator(scene)
+    traj = sim.rollout(20 * sim.model.settings.dt, record_every=3)
+    recorded = sum(a.nbytes for a in vars(traj).values()
+                   if isinstance(a, np.ndarray) and a.dtype.kind in "fiub" and a.ndim >= 1 and len(a) == len(traj.t))
+    estimate = sim._record_bytes(20, 3)
+    assert recorded <= estimate <= 2 * recorded

@@ -370,6 +370,16 @@ class Simulator:
         """One step (time stepping: dt; the ODE modes: one step of their integrator)."""
         _core.step(self.model, self._data)
 
+    def _record_bytes(self, steps: int, record_every: int) -> int:
+        """Bytes of the trajectory a rollout of `steps` steps recording every `record_every`-th makes."""
+        nc = self.model.num_candidates
+        # per record: the C++ recording's arrays (rollout.cpp: t, q, v, lam, contact_velocity, gaps, states,
+        # rows, anchor_lam, tau, joint_friction, limit_torque, residual, iterations, converged, dt, timings,
+        # contact_force, accelerometer) and the per-frame totals made from them (at most one frame per
+        # candidate: a force and a state)
+        per_record = self.model.nq + 4 * self.model.nv + 12 * nc + 3 * self.model.num_anchors + 13 + 4 * nc
+        return (-(-steps // record_every) + 1) * per_record * 8
+
     def rollout(self, duration: float | None = None, record_every: int = 1,
                 callback: Callable[["Simulator"], None] | None = None) -> Trajectory:
         """Simulate `duration` seconds (default: the scene's, or the `duration` override) from the
@@ -402,7 +412,7 @@ class Simulator:
                              f"one rollout takes ({MAX_STEPS:.0e}); use a larger dt or a shorter duration")
         n = int(round(steps))
         nc = self.model.num_candidates
-        record_bytes = (-(-n // record_every) + 1) * (self.model.nq + self.model.nv + 8 * nc + 12) * 8
+        record_bytes = self._record_bytes(n, record_every)
         if record_bytes > MAX_RECORD_BYTES:
             raise ValueError(f"recording {n} steps every {record_every} would take {record_bytes / 1e9:.1f} GB; "
                              f"record less often (record_every = {math.ceil(record_bytes / MAX_RECORD_BYTES * record_every)}"
