@@ -100,24 +100,35 @@ def _rot_z(yaw: float) -> np.ndarray:
 class TrotController(Controller):
     """A Raibert-style trot (Raibert, *Legged Robots That Balance*, 1986): the diagonal pairs (FL, HR)
     and (FR, HL) half a cycle apart, each foot ``duty`` of the ``period`` in stance, after standing still
-    for ``start`` seconds; the commanded speed ramps up over ``ramp`` seconds. A time-based gait: it
-    reads no contact state.
+    for ``start`` seconds; the commanded speed ramps up over ``ramp`` seconds. Lift-off follows the
+    schedule; touchdown is the foot's contact sensor when the loop gives one (``State.contacts``).
 
     Every foot has a target in the base's frame, turned into joint targets by exact analytic leg
     inverse kinematics (:meth:`leg_ik`), held by the scene's joint PD:
 
-    - stance: the target sweeps backwards at the commanded speed from where the foot touched down,
-      ``stance_stiffness`` of the way from the foot's actual position (a softer horizontal spring),
-      at the standing height; legs lengthen where the base dips (``attitude_gain``: pitch and roll);
-    - swing: a cubic Hermite from the lift-off point to Raibert's landing point ``nominal + v_cmd
-      T_stance / 2 + raibert_gain (v - v_cmd)`` (v: the base's filtered horizontal velocity), leaving
-      and reaching the ground at its speed seen from the base, lifted by ``lift sin(pi s)^lift_shape``;
-      gains ``swing_stiffness`` times the scene's;
+    - touchdown: a contact sensed from ``touch_window`` of the swing on starts the stance at the foot's
+      actual position (the PD then asks no horizontal force to bring it elsewhere), its height joining
+      the standing height over ``load_ramp``; a foot not down at its scheduled touchdown keeps
+      descending for up to ``seek_time`` before its stance starts anyway (without sensors: the
+      schedule's touchdown, at the swing's end point);
+    - stance: the target sweeps backwards at the commanded speed from there, ``stance_stiffness`` of the
+      way from the foot's actual position (a softer horizontal spring); legs lengthen where the base
+      dips (``attitude_gain``: pitch and roll);
+    - swing: horizontally a cubic Hermite from the lift-off point to Raibert's landing point ``nominal +
+      v_cmd T_stance / 2 + raibert_gain (v - v_cmd)`` (v: the base's filtered horizontal velocity),
+      done by ``horizontal_end`` of the swing, the foot then moving with the ground; vertically
+      ``lift sin(pi s)^lift_shape`` plus a parabola leaving and reaching the ground at
+      ``touchdown_speed``; gains ``swing_stiffness`` times the scene's;
     - feed-forward: static equilibrium tau = g(q) - J^T lambda (as ``control.gravity_feedforward``),
       lambda vertical, the weight shared by the stance feet and moved onto a foot over ``load_ramp``
-      of the cycle after touchdown and off it before lift-off, while the leg's gains soften to
-      ``liftoff_softness`` and its horizontal target joins the foot (so that an unloading foot is not
-      pushed sideways as its normal force vanishes).
+      of the cycle after touchdown and off it before lift-off (down to ``release_load``), while the
+      leg's gains soften to ``liftoff_softness`` and its horizontal target joins the foot;
+    - friction cone: a light leg on a sticking foot is in equilibrium, so the ground force its torques
+      ask is f = -J^-T (tau - g(q)) (tau: feed-forward plus the PD at the current state); where its
+      tangential part exceeds ``cone_margin`` mu f_n, a Jacobian-transpose correction of the
+      feed-forward scales it down to that (:meth:`_keep_in_cone`); a lifting foot the sensor still
+      finds on the ground is pulled straight up by ``release_pull`` with no tangential force, so that
+      its contact opens in one step instead of sliding through a vanishing normal force.
 
     The nominal feet and the height are the scene's initial posture, so at t = 0 the targets are the
     initial joints: nothing jumps.
@@ -144,24 +155,20 @@ class TrotController(Controller):
                             "path and touches down at the ground's speed)"),
         "velocity_filter": (0.05, "time constant of the base velocity filter, s"),
         "feedforward": (1.0, "scale of the feed-forward torques (1: static equilibrium, 0: PD only)"),
-        "contact_aware": (1.0, "1: a touchdown is the foot's contact sensor (State.contacts) in the swing's second "
-                          "half or later; 0 (or a loop without sensors): the end of the scheduled swing"),
+        "contact_aware": (1.0, "1: a touchdown is the foot's contact sensor (State.contacts) from touch_window of "
+                          "the swing on; 0 (or a loop without sensors): the end of the scheduled swing"),
+        "touch_window": (0.5, "fraction of the swing from which a sensed contact is the foot's touchdown"),
+        "seek_time": (0.03, "how long after its scheduled touchdown a swing foot that has not touched keeps "
+                      "descending to find the ground before its stance starts anyway, s"),
+        "seek_depth": (0.02, "how far below the ground a swing target seeking contact goes, m"),
         "horizontal_end": (0.75, "fraction of the swing by which the foot's horizontal motion relative to the "
                            "ground ends (it then descends vertically)"),
-        "touchdown_speed": (0.1, "vertical speed of the swing target leaving and reaching the ground, m/s (it "
-                            "keeps descending at it until the foot touches)"),
-        "height_ramp": (1.0, "x"),
-        "cone_measured": (0.0, "x"),
-        "seek_time": (0.03, "x"),
-        "descent_world": (0.0, "x"),
-        "release_load": (0.2, "x"),
-        "release_pull": (3.0, "x"),
-        "cone_floor": (0.0, "x"),
-        "cone_margin": (0.7, "x"),
-        "grip_margin": (1e9, "x"),
-        "grip_recovery": (0.05, "x"),
-        "touch_window": (0.5, "x"),
-        "seek_depth": (0.02, "how far below the ground a swing target seeking contact goes, m"),
+        "touchdown_speed": (0.1, "vertical speed of the swing target leaving and reaching the ground, m/s"),
+        "cone_margin": (0.7, "fraction of mu within which a stance foot's ground force, as its leg's torques ask it, "
+                        "is kept (0: no correction)"),
+        "release_load": (0.2, "share of its weight a stance foot still carries at lift-off (then let go at once)"),
+        "release_pull": (3.0, "upward force with which a lifting foot that still touches is pulled off, N (with "
+                         "no tangential force)"),
     }
     LEGS = ("FL", "FR", "HL", "HR")
     PAIRS = ((0, 3), (1, 2))  # (FL, HR), (FR, HL)
@@ -249,8 +256,6 @@ class TrotController(Controller):
         self.swing_velocity = np.zeros((4, 2))  # each swing's starting velocity (base frame, x y)
         self.last_targets = self.nominal.copy()  # (before the attitude correction)
         self.previous_targets = None  # the joint targets of the last call
-        self.descent_point = [None] * 4  # each swing's world point of its vertical descent (once reached)
-        self.grip = np.ones(4)  # each stance foot's friction feedback factor (1: the full horizontal spring)
         self.foot_frames = None  # each foot's index in the loop's ContactReading (found on first use)
 
     def command(self, t: float) -> float:
@@ -287,7 +292,6 @@ class TrotController(Controller):
         self.velocity += alpha * (v_heading - self.velocity)
         v_cmd = self.command(t)
         touching = self._touching(state)
-        self._contacts = getattr(state, "contacts", None)
 
         pin.forwardKinematics(self.model, self.data, q)
         pin.updateFramePlacements(self.model, self.data)
@@ -316,7 +320,6 @@ class TrotController(Controller):
                 self.swing_from[k] = self.last_targets[k].copy()
                 self.swing_velocity[k] = -self.velocity  # the ground's velocity seen from the base
                 self.swing_t0[k], s = t, 0.0
-                self.descent_point[k] = None
             elif not self.in_stance[k]:
                 if touching is None:  # the schedule alone: touchdown at the end of the swing
                     down = phi < duty
@@ -327,13 +330,12 @@ class TrotController(Controller):
                         self.swing_from[k] = self.last_targets[k].copy()
                         self.swing_velocity[k] = -self.velocity
                         self.swing_t0[k], s = t, 0.0
-                        self.descent_point[k] = None
                 if down:  # touchdown: the stance starts where the foot is (no horizontal error to push on)
                     self.in_stance[k] = True
-                    self.stance_from[k] = self.nominal[k].copy()
-                    if touching is not None and touching[k]:  # (the height too: it joins the standing height over the load ramp)
-                        self.stance_from[k] = actual[k].copy()
+                    if touching is not None and touching[k]:  # (its height too: it joins the standing height
+                        self.stance_from[k] = actual[k].copy()  # over the load ramp)
                     else:
+                        self.stance_from[k] = self.nominal[k].copy()
                         self.stance_from[k][:2] = self.last_targets[k][:2]
                     self.stance_t0[k] = t
             to_liftoff = ((duty - phi) % 1.0)  # of the cycle, to the scheduled lift-off
@@ -342,7 +344,7 @@ class TrotController(Controller):
                 targets[k][0] -= v_cmd * (t - self.stance_t0[k])
                 # the weight moves onto a foot after touchdown and off it before lift-off
                 since = (t - self.stance_t0[k]) / period
-                settle = min(1.0, since / (p["height_ramp"] * ramp))
+                settle = min(1.0, since / ramp)
                 targets[k][2] += settle * (self.nominal[k][2] - targets[k][2])
                 load[k] = min(1.0, (since + 1e-9) / ramp, max(p["release_load"], to_liftoff / ramp))
                 unload[k] = min(1.0, to_liftoff / ramp)
@@ -350,16 +352,15 @@ class TrotController(Controller):
                 # (K = J^-T kp J^-1), so a stiff unloading leg pushes sideways as its normal force vanishes
                 softness[k] = max(p["liftoff_softness"], min(1.0, to_liftoff / ramp))
             else:
-                targets[k] = self._swing_target(k, s, v_cmd, t_stance, t_swing, base)
+                targets[k] = self._swing_target(k, s, v_cmd, t_stance, t_swing)
                 load[k] = 0.0
                 softness[k] = p["swing_stiffness"] * max(p["liftoff_softness"],
                                                          min(1.0, s * (1.0 - duty) / ramp))
         # stance feet: only a part of the way from where they are to their sweep (a softer horizontal
         # spring: the friction the stance needs stays well inside the cone), none of it at lift-off
-        self._update_grip(state, touching, dt)
         for k in range(4):
             if self.in_stance[k] and t >= p["start"]:
-                gain = p["stance_stiffness"] * unload[k] * self.grip[k]
+                gain = p["stance_stiffness"] * unload[k]
                 targets[k][:2] = actual[k][:2] + gain * (targets[k][:2] - actual[k][:2])
         self.last_targets = targets.copy()  # (where a swing starts: the target the stance ended on)
         # level the base: legs extend where the base dips (pitch > 0 is nose down: the front ones; roll > 0
@@ -405,9 +406,7 @@ class TrotController(Controller):
         where f_n <= 0, as at lift-off)."""
         p = self.parameters
         mu = float(self.scene.mu) * p["cone_margin"]
-        measured = None if touching is None else np.asarray(self._contacts.frame_force)[self.foot_frames]
         pin.computeJointJacobians(self.model, self.data, q)
-        self._predicted = np.full((4, 3), np.nan)
         g = np.zeros(self.model.nv)
         g[6:] = gravity
         for k in range(4):
@@ -419,11 +418,8 @@ class TrotController(Controller):
                    + control.kd[iv] * (control.v_target[iv] - v[iv]))
             J = pin.getFrameJacobian(self.model, self.data, self.feet[k], pin.LOCAL_WORLD_ALIGNED)[:3, iv]
             f = -np.linalg.solve(J.T, tau - g[iv])
-            self._predicted[k] = f
             fn, ft = f[2], math.hypot(f[0], f[1])
-            if measured is not None and p["cone_measured"]:  # the last step's normal force, if smaller
-                fn = min(fn, measured[k][2])
-            limit = 0.0 if lifting else mu * max(fn - p["cone_floor"], 0.0)
+            limit = 0.0 if lifting else mu * max(fn, 0.0)
             if lifting and p["release_pull"] > 0.0:  # let go at once: a pull straight up opens the contact
                 control.tau_ff[iv] += J.T @ (f - np.array([0.0, 0.0, -p["release_pull"]]))
             elif ft > limit:
@@ -431,28 +427,7 @@ class TrotController(Controller):
                 wanted[:2] *= limit / ft
                 control.tau_ff[iv] += J.T @ (f - wanted)  # -J^T (wanted - f)
 
-    def _update_grip(self, state: State, touching, dt: float) -> None:
-        """Friction feedback from the contact sensors: where a stance foot's last force used more than
-        ``grip_margin`` of its cone (the tangential over mu times the normal force), its horizontal spring
-        (the share of the way to its sweep) shrinks by the excess; it recovers over ``grip_recovery`` s."""
-        p = self.parameters
-        if touching is None:
-            return
-        force = np.asarray(state.contacts.frame_force)[self.foot_frames]
-        mu = float(self.scene.mu)
-        for k in range(4):
-            if not self.in_stance[k]:
-                self.grip[k] = 1.0
-                continue
-            fn, ft = force[k][2], math.hypot(force[k][0], force[k][1])
-            use = ft / (mu * fn) if fn > 0.0 and mu > 0.0 else 0.0
-            if use > p["grip_margin"]:
-                self.grip[k] *= p["grip_margin"] / use
-            else:
-                self.grip[k] = min(1.0, self.grip[k] + dt / max(p["grip_recovery"], 1e-9))
-
-    def _swing_target(self, k: int, s: float, v_cmd: float, t_stance: float, t_swing: float,
-                      base=None) -> np.ndarray:
+    def _swing_target(self, k: int, s: float, v_cmd: float, t_stance: float, t_swing: float) -> np.ndarray:
         """The swing foot's target (base frame) at progress s: horizontally a cubic Hermite over the
         first ``horizontal_end`` of the swing from the lift-off point (leaving at the ground's velocity
         seen from the base) to where the ground carries it to Raibert's landing point by s = 1, then
@@ -473,14 +448,6 @@ class TrotController(Controller):
             span = h_end * t_swing
             out[:2] = (h00 * self.swing_from[k][:2] + h01 * waypoint + h10 * span * self.swing_velocity[k]
                        + h11 * span * ground_v)
-        elif p["descent_world"] and base is not None:
-            # descending: a point fixed in the world (where the horizontal motion ended), seen from the
-            # base as it moves: the foot reaches the ground with no horizontal velocity relative to it
-            if self.descent_point[k] is None:
-                point = self.nominal[k].copy()
-                point[:2] = waypoint
-                self.descent_point[k] = base.act(point)
-            out[:2] = base.actInv(self.descent_point[k])[:2]
         else:
             out[:2] = waypoint + ground_v * (s - h_end) * t_swing
         vt = p["touchdown_speed"] * t_swing  # per unit of s
