@@ -35,11 +35,25 @@ from .scene_schema import SceneError, did_you_mean
 
 @dataclass
 class State:
-    """What a controller reads: Pinocchio's q (nq), v (nv; a free flyer's in its base frame) and t."""
+    """What a controller reads: Pinocchio's q (nq), v (nv; a free flyer's in its base frame) and t,
+    and the contact sensors of the last step (``contacts``, a :class:`ContactReading`; None when the
+    loop has none, or before the first step)."""
 
     q: np.ndarray
     v: np.ndarray
     t: float
+    contacts: "ContactReading | None" = None
+
+
+@dataclass
+class ContactReading:
+    """Each contact-carrying frame's reading after the last step (docs/simulator.md, "Sensors"):
+    ``frame_names`` (nf,), ``frame_force`` (nf, 3) the total world force on it (N) and
+    ``frame_in_contact`` (nf,) bool (a contact of it sticks, slips or is closed)."""
+
+    frame_names: list
+    frame_force: np.ndarray
+    frame_in_contact: np.ndarray
 
 
 class Controller:
@@ -86,24 +100,35 @@ def _rot_z(yaw: float) -> np.ndarray:
 class TrotController(Controller):
     """A Raibert-style trot (Raibert, *Legged Robots That Balance*, 1986): the diagonal pairs (FL, HR)
     and (FR, HL) half a cycle apart, each foot ``duty`` of the ``period`` in stance, after standing still
-    for ``start`` seconds; the commanded speed ramps up over ``ramp`` seconds. A time-based gait: it
-    reads no contact state.
+    for ``start`` seconds; the commanded speed ramps up over ``ramp`` seconds. Lift-off follows the
+    schedule; touchdown is the foot's contact sensor when the loop gives one (``State.contacts``).
 
     Every foot has a target in the base's frame, turned into joint targets by exact analytic leg
     inverse kinematics (:meth:`leg_ik`), held by the scene's joint PD:
 
-    - stance: the target sweeps backwards at the commanded speed from where the foot touched down,
-      ``stance_stiffness`` of the way from the foot's actual position (a softer horizontal spring),
-      at the standing height; legs lengthen where the base dips (``attitude_gain``: pitch and roll);
-    - swing: a cubic Hermite from the lift-off point to Raibert's landing point ``nominal + v_cmd
-      T_stance / 2 + raibert_gain (v - v_cmd)`` (v: the base's filtered horizontal velocity), leaving
-      and reaching the ground at its speed seen from the base, lifted by ``lift sin(pi s)^lift_shape``;
-      gains ``swing_stiffness`` times the scene's;
+    - touchdown: a contact sensed from ``touch_window`` of the swing on starts the stance at the foot's
+      actual position (the PD then asks no horizontal force to bring it elsewhere), its height joining
+      the standing height over ``load_ramp``; a foot not down at its scheduled touchdown keeps
+      descending for up to ``seek_time`` before its stance starts anyway (without sensors: the
+      schedule's touchdown, at the swing's end point);
+    - stance: the target sweeps backwards at the commanded speed from there, ``stance_stiffness`` of the
+      way from the foot's actual position (a softer horizontal spring); legs lengthen where the base
+      dips (``attitude_gain``: pitch and roll);
+    - swing: horizontally a cubic Hermite from the lift-off point to Raibert's landing point ``nominal +
+      v_cmd T_stance / 2 + raibert_gain (v - v_cmd)`` (v: the base's filtered horizontal velocity),
+      done by ``horizontal_end`` of the swing, the foot then moving with the ground; vertically
+      ``lift sin(pi s)^lift_shape`` plus a parabola leaving and reaching the ground at
+      ``touchdown_speed``; gains ``swing_stiffness`` times the scene's;
     - feed-forward: static equilibrium tau = g(q) - J^T lambda (as ``control.gravity_feedforward``),
       lambda vertical, the weight shared by the stance feet and moved onto a foot over ``load_ramp``
-      of the cycle after touchdown and off it before lift-off, while the leg's gains soften to
-      ``liftoff_softness`` and its horizontal target joins the foot (so that an unloading foot is not
-      pushed sideways as its normal force vanishes).
+      of the cycle after touchdown and off it before lift-off (down to ``release_load``), while the
+      leg's gains soften to ``liftoff_softness`` and its horizontal target joins the foot;
+    - friction cone: a light leg on a sticking foot is in equilibrium, so the ground force its torques
+      ask is f = -J^-T (tau - g(q)) (tau: feed-forward plus the PD at the current state); where its
+      tangential part exceeds ``cone_margin`` mu f_n, a Jacobian-transpose correction of the
+      feed-forward scales it down to that (:meth:`_keep_in_cone`); a lifting foot the sensor still
+      finds on the ground is pulled straight up by ``release_pull`` with no tangential force, so that
+      its contact opens in one step instead of sliding through a vanishing normal force.
 
     The nominal feet and the height are the scene's initial posture, so at t = 0 the targets are the
     initial joints: nothing jumps.
@@ -130,6 +155,20 @@ class TrotController(Controller):
                             "path and touches down at the ground's speed)"),
         "velocity_filter": (0.05, "time constant of the base velocity filter, s"),
         "feedforward": (1.0, "scale of the feed-forward torques (1: static equilibrium, 0: PD only)"),
+        "contact_aware": (1.0, "1: a touchdown is the foot's contact sensor (State.contacts) from touch_window of "
+                          "the swing on; 0 (or a loop without sensors): the end of the scheduled swing"),
+        "touch_window": (0.5, "fraction of the swing from which a sensed contact is the foot's touchdown"),
+        "seek_time": (0.03, "how long after its scheduled touchdown a swing foot that has not touched keeps "
+                      "descending to find the ground before its stance starts anyway, s"),
+        "seek_depth": (0.02, "how far below the ground a swing target seeking contact goes, m"),
+        "horizontal_end": (0.75, "fraction of the swing by which the foot's horizontal motion relative to the "
+                           "ground ends (it then descends vertically)"),
+        "touchdown_speed": (0.1, "vertical speed of the swing target leaving and reaching the ground, m/s"),
+        "cone_margin": (0.7, "fraction of mu within which a stance foot's ground force, as its leg's torques ask it, "
+                        "is kept (0: no correction)"),
+        "release_load": (0.2, "share of its weight a stance foot still carries at lift-off (then let go at once)"),
+        "release_pull": (3.0, "upward force with which a lifting foot that still touches is pulled off, N (with "
+                         "no tangential force)"),
     }
     LEGS = ("FL", "FR", "HL", "HR")
     PAIRS = ((0, 3), (1, 2))  # (FL, HR), (FR, HL)
@@ -211,15 +250,32 @@ class TrotController(Controller):
         self.swing_from = self.nominal.copy()  # where each swing started (base frame)
         self.stance_from = self.nominal.copy()  # where each stance started
         self.stance_t0 = np.zeros(4)
+        self.swing_t0 = np.zeros(4)
         self.in_stance = np.ones(4, dtype=bool)
+        self.previous_phase = np.zeros(4)
         self.swing_velocity = np.zeros((4, 2))  # each swing's starting velocity (base frame, x y)
         self.last_targets = self.nominal.copy()  # (before the attitude correction)
         self.previous_targets = None  # the joint targets of the last call
+        self.foot_frames = None  # each foot's index in the loop's ContactReading (found on first use)
 
     def command(self, t: float) -> float:
         p = self.parameters
         ramp = max(p["ramp"], 1e-9)
         return p["speed"] * min(1.0, max(0.0, (t - p["start"]) / ramp))
+
+    def _touching(self, state: State) -> np.ndarray | None:
+        """Each foot's contact sensor (the last step's), or None without one (or contact_aware = 0)."""
+        reading = getattr(state, "contacts", None)
+        if reading is None or self.parameters["contact_aware"] == 0.0:
+            return None
+        if self.foot_frames is None:
+            names = list(reading.frame_names)
+            missing = [f"{leg}_FOOT" for leg in self.LEGS if f"{leg}_FOOT" not in names]
+            if missing:
+                raise ValueError(f"TrotController: the contact sensors have no frame {', '.join(missing)} "
+                                 f"(frames: {', '.join(names)})")
+            self.foot_frames = np.array([names.index(f"{leg}_FOOT") for leg in self.LEGS])
+        return np.asarray(reading.frame_in_contact, dtype=bool)[self.foot_frames]
 
     def __call__(self, state: State, control) -> None:
         p = self.parameters
@@ -235,9 +291,16 @@ class TrotController(Controller):
         alpha = 1.0 if p["velocity_filter"] <= 0 else min(1.0, dt / p["velocity_filter"])
         self.velocity += alpha * (v_heading - self.velocity)
         v_cmd = self.command(t)
+        touching = self._touching(state)
+
+        pin.forwardKinematics(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+        base = self.data.oMi[1]
+        actual = np.array([base.actInv(self.data.oMf[f].translation) for f in self.feet])
 
         period, duty = p["period"], p["duty"]
         t_stance, t_swing = duty * period, (1.0 - duty) * period
+        ramp = max(p["load_ramp"], 1e-9)
         targets = self.nominal.copy()
         load = np.ones(4)  # each foot's share of the weight (relative)
         softness = np.ones(4)  # each leg's PD gains relative to the scene's
@@ -245,52 +308,60 @@ class TrotController(Controller):
         for k in range(4):
             if t < p["start"]:  # standing on the initial posture
                 self.in_stance[k], self.stance_from[k], self.stance_t0[k] = True, self.nominal[k], t
+                self.previous_phase[k] = 0.0
                 continue
             pair = 0 if k in self.PAIRS[0] else 1
-            phi = ((t - p["start"]) / period + 0.5 * pair) % 1.0  # 0: touchdown, duty: lift-off
-            stance = phi < duty
-            if stance and not self.in_stance[k]:  # touchdown: the stance starts where the swing ended
-                self.stance_from[k], self.stance_t0[k] = self.last_targets[k].copy(), t
-            if not stance and self.in_stance[k]:  # lift-off: the swing starts where the stance ended
+            phi = ((t - p["start"]) / period + 0.5 * pair) % 1.0  # 0: touchdown, duty: lift-off (scheduled)
+            crossed_liftoff = self.previous_phase[k] < duty <= phi
+            self.previous_phase[k] = phi
+            s = (t - self.swing_t0[k]) / t_swing  # the swing's progress (> 1: seeking the ground)
+            if self.in_stance[k] and crossed_liftoff:  # lift-off: the swing starts where the stance ended
+                self.in_stance[k] = False
                 self.swing_from[k] = self.last_targets[k].copy()
                 self.swing_velocity[k] = -self.velocity  # the ground's velocity seen from the base
-            self.in_stance[k] = stance
-            if stance:
+                self.swing_t0[k], s = t, 0.0
+            elif not self.in_stance[k]:
+                if touching is None:  # the schedule alone: touchdown at the end of the swing
+                    down = phi < duty
+                else:  # the sensor: a contact in the swing's second half (or later, seeking) is a touchdown
+                    late = phi < duty and phi * period >= p["seek_time"]  # seeking too long: stance anyway
+                    down = (bool(touching[k]) and s >= p["touch_window"]) or late
+                    if crossed_liftoff:  # never found the ground over a whole stance: swing again from here
+                        self.swing_from[k] = self.last_targets[k].copy()
+                        self.swing_velocity[k] = -self.velocity
+                        self.swing_t0[k], s = t, 0.0
+                if down:  # touchdown: the stance starts where the foot is (no horizontal error to push on)
+                    self.in_stance[k] = True
+                    if touching is not None and touching[k]:  # (its height too: it joins the standing height
+                        self.stance_from[k] = actual[k].copy()  # over the load ramp)
+                    else:
+                        self.stance_from[k] = self.nominal[k].copy()
+                        self.stance_from[k][:2] = self.last_targets[k][:2]
+                    self.stance_t0[k] = t
+            to_liftoff = ((duty - phi) % 1.0)  # of the cycle, to the scheduled lift-off
+            if self.in_stance[k]:
                 targets[k] = self.stance_from[k].copy()
                 targets[k][0] -= v_cmd * (t - self.stance_t0[k])
                 # the weight moves onto a foot after touchdown and off it before lift-off
-                ramp = max(p["load_ramp"], 1e-9)
-                load[k] = min(1.0, (phi + 1e-9) / ramp, (duty - phi) / ramp)
-                unload[k] = min(1.0, (duty - phi) / ramp)
+                since = (t - self.stance_t0[k]) / period
+                settle = min(1.0, since / ramp)
+                targets[k][2] += settle * (self.nominal[k][2] - targets[k][2])
+                load[k] = min(1.0, (since + 1e-9) / ramp, max(p["release_load"], to_liftoff / ramp))
+                unload[k] = min(1.0, to_liftoff / ramp)
                 # before lift-off the leg softens with its load: a joint PD's force is not along its error
                 # (K = J^-T kp J^-1), so a stiff unloading leg pushes sideways as its normal force vanishes
-                softness[k] = max(p["liftoff_softness"], min(1.0, (duty - phi) / ramp))
+                softness[k] = max(p["liftoff_softness"], min(1.0, to_liftoff / ramp))
             else:
-                s = (phi - duty) / (1.0 - duty)
-                # swing: a cubic Hermite in s from the lift-off point to the landing point, leaving the ground
-                # at its velocity seen from the base and reaching it at the stance feet's (-v_cmd): no scuff,
-                # and a lift of sin(pi s)^lift_shape
-                h00, h10 = 2 * s ** 3 - 3 * s ** 2 + 1, s ** 3 - 2 * s ** 2 + s
-                h01, h11 = -2 * s ** 3 + 3 * s ** 2, s ** 3 - s ** 2
-                land = self._swing_end(k, v_cmd, t_stance)
-                targets[k] = h00 * self.swing_from[k] + h01 * land
-                targets[k][:2] += h10 * t_swing * self.swing_velocity[k]
-                targets[k][0] += h11 * (-v_cmd * t_swing)
-                targets[k][2] = self.nominal[k][2] + p["lift"] * math.sin(math.pi * s) ** p["lift_shape"]
+                targets[k] = self._swing_target(k, s, v_cmd, t_stance, t_swing)
                 load[k] = 0.0
                 softness[k] = p["swing_stiffness"] * max(p["liftoff_softness"],
-                                                         min(1.0, (phi - duty) / max(p["load_ramp"], 1e-9)))
+                                                         min(1.0, s * (1.0 - duty) / ramp))
         # stance feet: only a part of the way from where they are to their sweep (a softer horizontal
-        # spring: the friction the stance needs stays well inside the cone), none of it at lift-off (but
-        # all of it from touchdown on: a target following the foot would not resist its sliding)
-        pin.forwardKinematics(self.model, self.data, q)
-        pin.updateFramePlacements(self.model, self.data)
-        base = self.data.oMi[1]
+        # spring: the friction the stance needs stays well inside the cone), none of it at lift-off
         for k in range(4):
             if self.in_stance[k] and t >= p["start"]:
-                actual = base.actInv(self.data.oMf[self.feet[k]].translation)
                 gain = p["stance_stiffness"] * unload[k]
-                targets[k][:2] = actual[:2] + gain * (targets[k][:2] - actual[:2])
+                targets[k][:2] = actual[k][:2] + gain * (targets[k][:2] - actual[k][:2])
         self.last_targets = targets.copy()  # (where a swing starts: the target the stance ended on)
         # level the base: legs extend where the base dips (pitch > 0 is nose down: the front ones; roll > 0
         # lifts the left side), every foot alike so that no target jumps at touchdown or lift-off
@@ -324,6 +395,67 @@ class TrotController(Controller):
             for k in np.flatnonzero(load > 0.0):
                 J = pin.getFrameJacobian(self.model, self.data, self.feet[k], pin.LOCAL_WORLD_ALIGNED)
                 tau[self.iv[k]] -= J[2, self.iv[k]] * shares[k]  # -J^T (0, 0, share)
+        if p["cone_margin"] > 0.0 and t >= p["start"]:
+            self._keep_in_cone(q, v, control, pin.computeGeneralizedGravity(self.model, self.data, q)[6:], touching)
+
+    def _keep_in_cone(self, q, v, control, gravity, touching) -> None:
+        """Each stance foot's ground force as its leg's torques ask it (a light leg on a sticking foot is
+        in equilibrium: tau = g(q) - J^T f, so f = -J^-T (tau - g), tau the feed-forward plus the PD at
+        the current state) is moved into ``cone_margin`` of the friction cone by a Jacobian-transpose
+        correction of the feed-forward: the tangential part scaled down to cone_margin mu f_n (to 0
+        where f_n <= 0, as at lift-off)."""
+        p = self.parameters
+        mu = float(self.scene.mu) * p["cone_margin"]
+        pin.computeJointJacobians(self.model, self.data, q)
+        g = np.zeros(self.model.nv)
+        g[6:] = gravity
+        for k in range(4):
+            lifting = not self.in_stance[k]  # a swing foot the sensor still finds on the ground
+            if lifting and (touching is None or not touching[k]):
+                continue
+            iq, iv = self.iq[k], self.iv[k]
+            tau = (control.tau_ff[iv] + control.kp[iv] * (control.q_target[iq] - q[iq])
+                   + control.kd[iv] * (control.v_target[iv] - v[iv]))
+            J = pin.getFrameJacobian(self.model, self.data, self.feet[k], pin.LOCAL_WORLD_ALIGNED)[:3, iv]
+            f = -np.linalg.solve(J.T, tau - g[iv])
+            fn, ft = f[2], math.hypot(f[0], f[1])
+            limit = 0.0 if lifting else mu * max(fn, 0.0)
+            if lifting and p["release_pull"] > 0.0:  # let go at once: a pull straight up opens the contact
+                control.tau_ff[iv] += J.T @ (f - np.array([0.0, 0.0, -p["release_pull"]]))
+            elif ft > limit:
+                wanted = f.copy()
+                wanted[:2] *= limit / ft
+                control.tau_ff[iv] += J.T @ (f - wanted)  # -J^T (wanted - f)
+
+    def _swing_target(self, k: int, s: float, v_cmd: float, t_stance: float, t_swing: float) -> np.ndarray:
+        """The swing foot's target (base frame) at progress s: horizontally a cubic Hermite over the
+        first ``horizontal_end`` of the swing from the lift-off point (leaving at the ground's velocity
+        seen from the base) to where the ground carries it to Raibert's landing point by s = 1, then
+        moving with the ground (the foot descends vertically relative to the ground); vertically
+        ``lift sin(pi s)^lift_shape`` plus a parabola leaving and reaching the ground at
+        ``touchdown_speed``, and beyond s = 1 (no contact yet) descending at that speed down to
+        ``seek_depth`` below it."""
+        p = self.parameters
+        h_end = min(1.0, max(1e-3, p["horizontal_end"]))
+        land = self._swing_end(k, v_cmd, t_stance)
+        ground_v = np.array([-v_cmd, 0.0])  # the ground's velocity seen from the base (commanded)
+        waypoint = land[:2] - ground_v * (1.0 - h_end) * t_swing  # where the horizontal motion ends
+        out = self.nominal[k].copy()
+        sh = min(1.0, s / h_end)
+        if sh < 1.0:
+            h00, h10 = 2 * sh ** 3 - 3 * sh ** 2 + 1, sh ** 3 - 2 * sh ** 2 + sh
+            h01, h11 = -2 * sh ** 3 + 3 * sh ** 2, sh ** 3 - sh ** 2
+            span = h_end * t_swing
+            out[:2] = (h00 * self.swing_from[k][:2] + h01 * waypoint + h10 * span * self.swing_velocity[k]
+                       + h11 * span * ground_v)
+        else:
+            out[:2] = waypoint + ground_v * (s - h_end) * t_swing
+        vt = p["touchdown_speed"] * t_swing  # per unit of s
+        if s <= 1.0:
+            out[2] += p["lift"] * math.sin(math.pi * s) ** p["lift_shape"] + vt * s * (1.0 - s)
+        else:
+            out[2] -= min(p["seek_depth"], vt * (s - 1.0))
+        return out
 
     def _swing_end(self, k: int, v_cmd: float, t_stance: float) -> np.ndarray:
         """Raibert's landing point: half a stance's travel ahead of the nominal foot, plus a correction
@@ -376,10 +508,25 @@ class SimulatorLoop:
 
     def __init__(self, controller):
         self.controller = controller
+        self._frames = None
 
     def __call__(self, sim) -> None:
         d = sim.data
-        self.controller(State(d.q, d.v, d.t), d)
+        self.controller(State(d.q, d.v, d.t, self.contacts(sim)), d)
+
+    def contacts(self, sim) -> "ContactReading | None":
+        """The feet's forces and contact states after the last step (the frame totals of
+        ``sim.sensors()`` without its other readings: a few microseconds); None with no step behind."""
+        d = sim.data
+        if not d.sensor_time == d.t:  # no step behind the current state (NaN before the first)
+            return None
+        if self._frames is None:
+            self._frames = sim._sensor_frames()
+        names, incidence = self._frames
+        nc = incidence.shape[1]
+        force = np.asarray(d.contact_force, dtype=float).T.reshape(nc, 3)
+        closed = np.array([int(state) > 0 for state in d.states], dtype=bool)  # 1 stick, 2 slip, 3 closed
+        return ContactReading(names, incidence @ force, (np.abs(incidence) * closed).sum(axis=1) > 0)
 
 
 # ---------------------------------------------------------------- the same controller on MuJoCo
@@ -435,6 +582,9 @@ class MujocoLoop:
                 self.actuated.append((aid, model.joints[j].idx_q, model.joints[j].idx_v))
         self.control = SimpleNamespace(tau_ff=scene.tau_ff.copy(), q_target=scene.q_target.copy(),
                                        v_target=np.zeros(model.nv), kp=scene.kp.copy(), kd=scene.kd.copy())
+        from . import sensors as _sensors  # noqa: PLC0415
+
+        self.frame_names, self.incidence = _sensors.frame_incidence(scene)
         self.reset()
 
     def reset(self) -> None:
@@ -443,6 +593,29 @@ class MujocoLoop:
         self.data.qpos[:] = twin.qpos(self.scene.q0)
         self.data.qvel[:] = twin.qvel(self.scene.q0, self.scene.v0)
         self.controller.reset()
+        self.stepped = False
+
+    def contacts(self) -> "ContactReading | None":
+        """stiction's ContactReading from MuJoCo's contacts after the last step: each contact geom's
+        force (mj_contactForce, turned to the world frame, on the geom's own body) summed per frame;
+        a frame is in contact when one of its geoms carries a positive normal force."""
+        if not self.stepped:
+            return None
+        mj, m, d = self.mj, self.twin.model, self.data
+        geoms = self.twin.contact_geoms
+        nc = len(geoms)
+        force, touching = np.zeros((nc, 3)), np.zeros(nc, dtype=bool)
+        local = np.zeros(6)
+        for i in range(d.ncon):
+            con = d.contact[i]
+            for sign, g in ((-1.0, con.geom1), (1.0, con.geom2)):  # the force acts on geom2, its opposite on geom1
+                if g in geoms:
+                    c = geoms.index(g)
+                    mj.mj_contactForce(m, d, i, local)
+                    force[c] += sign * (con.frame.reshape(3, 3).T @ local[:3])
+                    touching[c] |= local[0] > 0.0
+        return ContactReading(self.frame_names, self.incidence @ force,
+                              (np.abs(self.incidence) * touching).sum(axis=1) > 0)
 
     def state(self) -> State:
         """(q, v, t) in Pinocchio's coordinates (free joint: world linear velocity to the base frame)."""
@@ -456,7 +629,7 @@ class MujocoLoop:
                 v[j.idx_v + 3:j.idx_v + 6] = d.qvel[j.dofadr + 3:j.dofadr + 6]
             else:
                 v[j.idx_v] = d.qvel[j.dofadr]
-        return State(q, v, float(d.time))
+        return State(q, v, float(d.time), self.contacts())
 
     def apply(self) -> None:
         m, d, c = self.twin.model, self.data, self.control
@@ -485,6 +658,7 @@ class MujocoLoop:
             self.controller(self.state(), self.control)
             self.apply()
             mj.mj_step(m, d)
+            self.stepped = True
             for i in range(d.ncon):
                 con = d.contact[i]
                 for g in (con.geom1, con.geom2):
