@@ -256,3 +256,35 @@ def test_mujoco_loop_reads_the_feet_sensors():
     weight = pin.computeTotalMass(scene.model) * 9.81
     assert reading.frame_in_contact.all()
     assert reading.frame_force[:, 2].sum() == pytest.approx(weight, rel=0.01)
+
+
+def test_step_runs_the_scenes_controller_as_rollout_does():
+    # a loop of step() takes the same steps as rollout(): the scene's controller runs before each
+    a, b = Simulator("solo12-trot"), Simulator("solo12-trot")
+    traj = a.rollout(0.3)
+    for _ in range(len(traj.t) - 1):
+        b.step()
+    assert np.array_equal(b.data.q, traj.q[-1]) and np.array_equal(b.data.v, traj.v[-1])
+    # without it the robot is the user's: the PD holds the last targets, nothing walks
+    c = Simulator("solo12-trot")
+    c.controller = None
+    for _ in range(300):
+        c.step()
+    assert abs(c.data.q[0] - traj.q[0, 0]) < 0.2 * abs(traj.q[-1, 0] - traj.q[0, 0]) + 1e-3
+    with pytest.raises(TypeError, match="controller must be callable"):
+        c.controller = 3
+
+
+def test_a_plain_function_as_controller_drives_step_rollout_and_reset():
+    sim = Simulator("solo12-stand")
+    calls = []
+
+    def push(state, data):
+        calls.append(state.t)
+        data.tau_ff[0] = 1.0  # a steady push along the base's x
+
+    sim.controller = push
+    sim.step()
+    sim.rollout(0.01)
+    sim.reset()
+    assert len(calls) == 11 and calls[0] == 0.0

@@ -258,11 +258,10 @@ class Simulator:
         self.model = _core.SimulatorModel(sc.model, sc.halfspaces, sc.contacts, sc.anchors, settings,
                                           sc.geometry, sc.pairs)
         self._data = _core.SimulatorData(self.model)
-        from .controllers import SimulatorLoop, build_controller  # noqa: PLC0415
+        from .controllers import build_controller  # noqa: PLC0415
 
-        #: the scene's controller ([controller] table; None without one): rollout() runs it by default
+        self._controller_loop = None
         self.controller = build_controller(sc)
-        self._controller_loop = SimulatorLoop(self.controller) if self.controller is not None else None
         self.reset()
 
     @staticmethod
@@ -350,8 +349,9 @@ class Simulator:
         d.q, d.v, d.t = sc.q0, sc.v0, 0.0
         d.kp, d.kd, d.q_target, d.tau_ff = sc.kp, sc.kd, sc.q_target, sc.tau_ff
         d.v_target = np.zeros(sc.model.nv)
-        if getattr(self, "controller", None) is not None:
-            self.controller.reset()
+        reset = getattr(getattr(self, "controller", None), "reset", None)
+        if callable(reset):  # (a plain function as controller has no state to forget)
+            reset()
 
     def set_state(self, q=None, v=None, t: float | None = None) -> None:
         """Set the configuration q (nq), velocity v (nv) and/or time t. Arrays are checked for
@@ -366,8 +366,29 @@ class Simulator:
         if t is not None:
             self.data.t = _positive("t", t, allow_zero=True)
 
+    @property
+    def controller(self):
+        """The controller step() and rollout() run before each step: the scene's ``[controller]``
+        (stiction.controllers), None without one. Set it to another (called as
+        ``controller(State, sim.data)``) or to None to drive the robot yourself."""
+        return self._controller
+
+    @controller.setter
+    def controller(self, controller) -> None:
+        from .controllers import SimulatorLoop  # noqa: PLC0415
+
+        if controller is not None and not callable(controller):
+            raise TypeError(f"Simulator.controller must be callable (controller(state, data)) or None, "
+                            f"got {type(controller).__name__}")
+        self._controller = controller
+        self._controller_loop = SimulatorLoop(controller) if controller is not None else None
+
     def step(self) -> None:
-        """One step (time stepping: dt; the ODE modes: one step of their integrator)."""
+        """One step (time stepping: dt; the ODE modes: one step of their integrator). A scene with a
+        ``[controller]`` runs it first, as rollout() does (a loop of step() and a rollout take the same
+        steps); to drive such a scene yourself, set ``sim.controller = None``."""
+        if self._controller_loop is not None:
+            self._controller_loop(self)
         _core.step(self.model, self._data)
 
     def _record_bytes(self, steps: int, record_every: int) -> int:
