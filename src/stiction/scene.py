@@ -414,17 +414,7 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
         if initial["base_xy"] is not None or initial["q"] is None:
             q0[:2] = initial["base_xy"] if initial["base_xy"] is not None else [0.0, 0.0]
         # lower (or raise) the base so the lowest contact touches z = 0, plus `drop`
-        data = model.createData()
-        pin.framesForwardKinematics(model, data, q0)
-        lowest = min((data.oMf[c.frame].act(c.offset)[2] - c.radius for c in contacts if c.halfspace == 0),
-                     default=math.inf)
-        if geometry is not None:  # coal pairs with the ground: their signed distances
-            gdata = geometry.createData()
-            pin.updateGeometryPlacements(model, data, geometry, gdata)
-            for gp in pairs:
-                cp = geometry.collisionPairs[gp.pair]
-                if "ground" in (geometry.geometryObjects[cp.first].name, geometry.geometryObjects[cp.second].name):
-                    lowest = min(lowest, pin.computeDistance(geometry, gdata, gp.pair).min_distance)
+        lowest = _lowest_contact(model, q0, contacts, geometry, pairs)
         if math.isfinite(lowest) and initial["q"] is None:
             q0[2] += -lowest + initial["drop"]
         if initial["base_velocity"] is not None:
