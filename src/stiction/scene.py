@@ -432,10 +432,7 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
                 q0[iz] += -lowest + initial["drop"]
     elif planar and not anchors:
         if initial["q"] is None:  # lower (or raise) the body so its lowest contact touches z = 0, plus `drop`
-            data = model.createData()
-            pin.framesForwardKinematics(model, data, q0)
-            lowest = min((data.oMf[c.frame].act(c.offset)[2] - c.radius for c in contacts if c.halfspace == 0),
-                         default=math.inf)
+            lowest = _lowest_contact(model, q0, contacts, None, [])  # (its sphere/point contacts)
             if math.isfinite(lowest):
                 q0[1] += -lowest + initial["drop"]  # joint y = world z
         if initial["planar_velocity"] is not None:
