@@ -84,6 +84,29 @@ struct SystemWork {
   bool free_body_scaling_diagonal = false;  ///< S is diagonal (a box: centre of mass at its origin)
 };
 
+/// A time step solved with the joints' dry friction holding (locked_joints.cpp): the contacts' problem
+/// with every friction-row coordinate locked, its operator, solver and scratch, and the prediction.
+struct LockedJoints {
+  bool held = false;     ///< the last step's joint rows were friction rows only, all sticking
+  int skip = 0;          ///< steps left before the next try, after a try whose joints did not hold
+  int backoff = 0;       ///< the last skip (doubled at each miss, up to kLockedMaxBackoff)
+  bool pending_full = false;          ///< this step's full A and problem not built yet (completeLockedStep)
+  const SimulatorModel* sim = nullptr;  ///< the model of that step (for completeLockedStep)
+  double scale = 0.0;                 ///< that step's h
+  std::vector<char> locked;           ///< per coordinate: it has a friction row (locked)
+  std::vector<int> free;              ///< the coordinates without one
+  Eigen::MatrixXd mff, z, a;          ///< M_FF = L L^T (L), J_CF L^-T, the reduced A = Z^T Z
+  Eigen::VectorXd xl, y, xf, b, guess, pj;
+  Eigen::VectorXd x;   ///< M^-1 J^T P of the step it solved (integrateTimeStep reads it)
+  Eigen::VectorXd mx;  ///< M x (scratch)
+  Eigen::MatrixXd msym;  ///< M, both triangles
+  std::shared_ptr<DenseDelassus> delassus;
+  std::unique_ptr<ContactProblem> problem;
+  std::vector<int> active;            ///< the contacts `problem` was built for
+  std::unique_ptr<ContactSolver> solver;  ///< its own: the sticking step's held factor stays the full problem's
+  SolverResult result;
+};
+
 struct SimulatorWorkspace {
   explicit SimulatorWorkspace(const SimulatorModel& sim);
 
@@ -163,6 +186,8 @@ struct SimulatorWorkspace {
 
   Eigen::VectorXd row_scratch;  ///< one value per row
   Eigen::VectorXd nv_scratch;   ///< one value per velocity coordinate
+
+  LockedJoints locked;  ///< the joints' dry friction holding: the reduced problem (locked_joints.cpp)
 };
 
 }  // namespace stiction

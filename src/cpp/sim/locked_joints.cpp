@@ -1,0 +1,278 @@
+// Stages 4b and 5 of a time step while the joints' dry friction holds (docs/joint-rows.md, "Joints
+// that hold"): the contacts' problem with every friction-row coordinate locked.
+//
+// The step's problem (eq. 65, impulses P = h lambda) has the contacts' rows C and one friction row per
+// locked coordinate, J = [J_C; E] with E selecting the set L of those coordinates, A = J M^-1 J^T and
+// u = A P - h b. Write x = M^-1 (J_C^T P_C + E^T P_J) (the velocity change the impulses make). Every
+// friction row sticking means u_J = x_L - h b_J = 0, so x_L = h b_J, and M x = J_C^T P_C + E^T P_J read
+// on the other coordinates F (E^T P_J has none there) gives
+//   x_F = M_FF^-1 (J_CF^T P_C - M_FL x_L),
+//   u_C = J_C x - h b_C = A_r P_C - b_r,  A_r = J_CF M_FF^-1 J_CF^T,
+//   b_r = h b_C + J_CF M_FF^-1 M_FL x_L - J_CL x_L,
+// and the friction impulses follow from M x's rows L: P_J = M_LF x_F + M_LL x_L - J_CL^T P_C. This is
+// the Schur complement of eq. 65's equations u_J = 0, done on M (M_FF: the free coordinates only, 6
+// for a legged robot's base) rather than on A (whose J rows with the joints' rows would cost as many
+// pairs of chains again, robot_delassus.cpp). The contacts' problem (A_r, b_r) is solved to the
+// tolerance as any other; when every |P_J| then lies within its bound h tau_c, (P_C, P_J) solves the
+// full problem: its contact rows' natural map is the reduced one's, and each friction row has u = 0
+// inside its interval (box complementarity holds exactly). The full problem's all-stick family (24 rows
+// of rank <= 18 on Solo-12) is then resolved by the reduced solve's own choice from the warm start, a
+// solution as exact as the full solver's but not necessarily the same one.
+#include <algorithm>
+#include <cmath>
+
+#include "stages.hpp"
+
+namespace stiction {
+namespace stages {
+
+namespace {
+
+// A friction impulse must lie this far inside its bound (relative): its rounding stays inside.
+constexpr double kInsideBound = 1e-6;
+// After a try whose joints did not hold, the next tries wait 1, 2, 4 ... up to this many steps.
+constexpr int kLockedMaxBackoff = 64;
+
+bool missed(LockedJoints& lk) {
+  lk.backoff = std::min(kLockedMaxBackoff, 2 * lk.backoff + 1);
+  lk.skip = lk.backoff;
+  return false;
+}
+
+}  // namespace
+
+bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, Stopwatch& watch) {
+  SimulatorWorkspace& w = *sd.work;
+  LockedJoints& lk = w.locked;
+  lk.pending_full = false;
+  if (!lk.held) return false;
+  if (lk.skip > 0) {
+    --lk.skip;
+    return false;
+  }
+  const std::vector<JointRow>& joint_rows = sd.out.joint_rows;
+  const auto nj = static_cast<Eigen::Index>(joint_rows.size());
+  const Eigen::Index m = sd.out.rows, mc = m - nj;
+  if (nj == 0 || mc <= 0 || !sim.anchors.empty() || sim.systems.size() != 1 || sim.systems[0].free_body ||
+      sim.systems[0].pinocchio_passes || !w.solver->exactLaw() || !wholeWorldPart(sim, sd))
+    return false;
+  for (const JointRow& r : joint_rows)
+    if (r.kind != JointRowKind::kFriction) return false;
+  const SystemWork& part = w.parts[0];
+  const Eigen::MatrixXd& M = part.data.M;
+  const Eigen::MatrixXd& J = part.J;  // m x nv
+  const Eigen::Index nv = J.cols();
+  if (J.rows() != m || M.rows() != nv) return false;
+  lk.locked.assign(static_cast<std::size_t>(nv), 0);
+  for (const JointRow& r : joint_rows) {
+    if (lk.locked[static_cast<std::size_t>(r.dof)]) return false;
+    lk.locked[static_cast<std::size_t>(r.dof)] = 1;
+  }
+  lk.free.clear();
+  for (int i = 0; i < nv; ++i)
+    if (!lk.locked[static_cast<std::size_t>(i)]) lk.free.push_back(i);
+  const auto nf = static_cast<Eigen::Index>(lk.free.size());
+  if (nf == 0) return false;
+  const int* F = lk.free.data();
+  // (raw loops: at these sizes, 6 free coordinates and 12 contact rows on a legged robot, Eigen's
+  // dynamic-size triangular solves and products cost several times their arithmetic)
+  const double* Mp = M.data();
+  const auto mass = [Mp, nv](int i, int j) { return i <= j ? Mp[j * nv + i] : Mp[i * nv + j]; };  // (upper triangle)
+  const double* Jp = J.data();  // J(r, c) at c * m + r
+  // M_FF = L L^T (L's lower triangle by columns in mff)
+  lk.mff.resize(nf, nf);
+  double* Lp = lk.mff.data();
+  for (Eigen::Index j = 0; j < nf; ++j) {
+    double d = mass(F[j], F[j]);
+    for (Eigen::Index k = 0; k < j; ++k) d -= Lp[k * nf + j] * Lp[k * nf + j];
+    if (!(d > 0.0)) return false;
+    d = std::sqrt(d);
+    Lp[j * nf + j] = d;
+    for (Eigen::Index i = j + 1; i < nf; ++i) {
+      double s = mass(F[i], F[j]);
+      for (Eigen::Index k = 0; k < j; ++k) s -= Lp[k * nf + i] * Lp[k * nf + j];
+      Lp[j * nf + i] = s / d;
+    }
+  }
+
+  // x_L = h b_J; Zt = J_CF L^-T (Z = L^-1 J_CF^T transposed: mc x nf by columns, so that the loops
+  // below run along the contact rows, independent sums, rather than along short dependent ones)
+  lk.xl.resize(nj);
+  for (Eigen::Index k = 0; k < nj; ++k) lk.xl[k] = h * sd.out.b[mc + k];
+  lk.z.resize(mc, nf);
+  double* Zp = lk.z.data();  // Zt(r, a) at a * mc + r
+  for (Eigen::Index a = 0; a < nf; ++a) {
+    double* za = Zp + a * mc;
+    const double* ja = Jp + F[a] * m;
+    for (Eigen::Index r = 0; r < mc; ++r) za[r] = ja[r];
+    for (Eigen::Index k = 0; k < a; ++k) {
+      const double l = Lp[k * nf + a];
+      const double* zk = Zp + k * mc;
+      for (Eigen::Index r = 0; r < mc; ++r) za[r] -= l * zk[r];
+    }
+    const double d = 1.0 / Lp[a * nf + a];
+    for (Eigen::Index r = 0; r < mc; ++r) za[r] *= d;
+  }
+  // y = L^-1 M_FL x_L, from M [0; x_L] = [M_FL x_L; M_LL x_L]
+  lk.x.setZero(nv);
+  for (Eigen::Index k = 0; k < nj; ++k) lk.x[joint_rows[k].dof] = lk.xl[k];
+  lk.msym = M.selfadjointView<Eigen::Upper>();  // (M's upper triangle is the one written)
+  lk.mx.noalias() = lk.msym * lk.x;
+  lk.y.resize(nf);
+  for (Eigen::Index a = 0; a < nf; ++a) {
+    double s = lk.mx[F[a]];
+    for (Eigen::Index k = 0; k < a; ++k) s -= Lp[k * nf + a] * lk.y[k];
+    lk.y[a] = s / Lp[a * nf + a];
+  }
+  // A_r = Z^T Z: its lower triangle entry by entry, mirrored (exactly symmetric)
+  lk.a.resize(mc, mc);
+  double* Ap = lk.a.data();
+  for (Eigen::Index c = 0; c < mc; ++c)
+    for (Eigen::Index r = c; r < mc; ++r) {
+      double s = 0.0;
+      for (Eigen::Index a = 0; a < nf; ++a) s += Zp[a * mc + r] * Zp[a * mc + c];
+      Ap[c * mc + r] = Ap[r * mc + c] = s;
+    }
+  // b_r = h b_C + Z^T y - J_CL x_L
+  lk.b = h * sd.out.b.head(mc);
+  double* bp = lk.b.data();
+  for (Eigen::Index a = 0; a < nf; ++a) {
+    const double* za = Zp + a * mc;
+    const double ya = lk.y[a];
+    for (Eigen::Index r = 0; r < mc; ++r) bp[r] += za[r] * ya;
+  }
+  for (Eigen::Index k = 0; k < nj; ++k) {
+    const double* jk = Jp + joint_rows[k].dof * m;
+    const double xk = lk.xl[k];
+    for (Eigen::Index r = 0; r < mc; ++r) bp[r] -= jk[r] * xk;
+  }
+  // (x * 0 sums to 0 exactly unless some x is inf or NaN)
+  const bool finite = !std::isnan((lk.a.array() * 0.0).sum() + (lk.b.array() * 0.0).sum());
+  if (!finite) return false;  // (the full path says what diverged)
+  watch.lap(sd.out.timings.delassus);
+
+  // The contacts' problem: its operator updated in place while the contacts are the same
+  if (!lk.problem || lk.active != sd.out.active) {
+    std::vector<Constraint> cons;
+    for (int i : sd.out.active)
+      switch (sd.out.candidate_rows[i]) {
+        case 1: cons.push_back(Constraint::unilateral()); break;
+        case 2: cons.push_back(Constraint::planarFriction(candidateMu(sim, i))); break;
+        default: cons.push_back(Constraint::spatialFriction(candidateMu(sim, i)));
+      }
+    lk.delassus = std::make_shared<DenseDelassus>(lk.a);
+    lk.problem = std::make_unique<ContactProblem>(lk.delassus, lk.b, std::move(cons), 1e-6, false);
+    lk.active = sd.out.active;
+  } else {
+    lk.delassus->matrix() = lk.a;
+    lk.problem->setB(lk.b);
+  }
+  if (!lk.solver) {
+    FormulationSettings fs = sim.settings.formulation_settings;
+    fs.exact_solver = sim.settings.solver;
+    lk.solver = makeFormulation(sim.settings.formulation, fs);
+  }
+  SolverSettings settings = sim.settings.solver_settings;
+  settings.measure_exact_law = false;
+  const bool any = stepGuess(sim, sd, h, /*exact=*/true);
+  lk.guess = w.guess.head(mc);
+  settings.warm_start = sim.settings.warm_start && any ? WarmStart::kGiven : WarmStart::kNone;
+  solve(*lk.problem, *lk.solver, settings, lk.result, &lk.guess);
+  const SolverResult& rr = lk.result;
+  // Judged against the full problem's b: its natural map is the reduced one's (u_J = 0)
+  const double full_b = h * sd.out.b.norm();
+  const double full_scale = full_b > 0.0 ? full_b : 1.0;
+  const double reduced_scale = stoppingScale(*lk.problem);
+  const double natural_map = rr.relative_residual * reduced_scale, bound = rr.residual_bound * reduced_scale;
+  if (!rr.converged || !(natural_map + bound <= settings.tolerance * full_scale)) {
+    watch.lap(sd.out.timings.solve);
+    return missed(lk);
+  }
+  // x_F = L^-T (Z P_C - y)
+  const double* pc = rr.lam.data();
+  lk.xf.resize(nf);
+  for (Eigen::Index a = 0; a < nf; ++a) {
+    const double* za = Zp + a * mc;
+    double s = -lk.y[a];
+    for (Eigen::Index r = 0; r < mc; ++r) s += za[r] * pc[r];
+    lk.xf[a] = s;
+  }
+  for (Eigen::Index a = nf - 1; a >= 0; --a) {
+    double s = lk.xf[a];
+    for (Eigen::Index k = a + 1; k < nf; ++k) s -= Lp[a * nf + k] * lk.xf[k];
+    lk.xf[a] = s / Lp[a * nf + a];
+  }
+  // x = [x_F; x_L] is M^-1 J^T P (the integration's velocity change); P_J = (M x)_L - J_CL^T P_C
+  for (Eigen::Index a = 0; a < nf; ++a) lk.x[F[a]] = lk.xf[a];
+  lk.mx.noalias() = lk.msym * lk.x;
+  lk.pj.resize(nj);
+  for (Eigen::Index k = 0; k < nj; ++k) {
+    const int dof = joint_rows[k].dof;
+    const double* jcol = Jp + dof * m;
+    double s = lk.mx[dof];
+    for (Eigen::Index r = 0; r < mc; ++r) s -= jcol[r] * pc[r];
+    const double limit = h * sim.joint_friction[dof];
+    if (!(std::abs(s) <= (1.0 - kInsideBound) * limit)) {
+      watch.lap(sd.out.timings.solve);
+      return missed(lk);
+    }
+    lk.pj[k] = s;
+  }
+  lk.backoff = 0;
+  // The full problem's result: the contacts' from the reduced solve, the friction rows sticking (u = 0)
+  SolverResult& r = sd.out.result;
+  const std::size_t contact_blocks = rr.states.size();
+  r.resize(m, contact_blocks + static_cast<std::size_t>(nj));
+  r.lam.head(mc) = rr.lam;
+  r.lam.tail(nj) = lk.pj;
+  r.u.head(mc) = rr.u;
+  r.u.tail(nj).setZero();
+  std::copy(rr.states.begin(), rr.states.end(), r.states.begin());
+  std::fill(r.states.begin() + static_cast<std::ptrdiff_t>(contact_blocks), r.states.end(), ContactState::kStick);
+  r.iterations = rr.iterations;
+  r.converged = true;
+  r.status = SolveStatus::kConverged;
+  r.relative_residual = natural_map / full_scale;
+  r.residual = natural_map / (1.0 + full_b);
+  r.residual_bound = bound / full_scale;
+  r.precision_floor = rr.precision_floor * reduced_scale / full_scale;
+  r.lambda_norm = r.lam.norm();
+  r.min_solution_norm = 0.0;
+  r.implicated_blocks.clear();
+  r.divergence_candidates.clear();
+  r.seconds = rr.seconds;
+  r.warm_start_seconds = rr.warm_start_seconds;
+  r.warm_start_iterations = rr.warm_start_iterations;
+  // (swapped and assigned: no allocation once the strings have grown)
+  std::swap(r.stages, lk.result.stages);
+  r.solver.assign(rr.solver);
+  r.message.assign(rr.message).append(" (joints locked: their dry friction holds)");
+  r.own_converged = true;
+  r.own_residual = r.relative_residual;
+  r.own_law.assign(rr.own_law);
+  r.exact_law_measured = false;
+  // (integration's M^-1 J^T P: x above; the chains' Y not built)
+  sd.out.sparse = false;
+  w.robot_chains = false;
+  w.a_in_operator = false;
+  lk.pending_full = true;
+  lk.sim = &sim;
+  lk.scale = h;
+  recordSolution(sim, sd, h, r.iterations);
+  watch.lap(sd.out.timings.solve);
+  return true;
+}
+
+}  // namespace stages
+
+void completeLockedStep(const SimulatorData& data) {
+  LockedJoints& lk = data.work->locked;
+  if (!lk.pending_full) return;
+  // (the step's own data, whose A was left for later: built now from that step's J, M and b)
+  SimulatorData& sd = const_cast<SimulatorData&>(data);
+  const SimulatorModel& sim = *lk.sim;
+  stages::delassusOperator(sim, sd);  // (clears pending_full)
+  stages::setStepProblem(sim, sd, lk.scale);
+}
+
+}  // namespace stiction
