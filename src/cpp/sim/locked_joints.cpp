@@ -33,6 +33,92 @@ constexpr double kInsideBound = 1e-6;
 // After a try whose joints did not hold, the next tries wait 1, 2, 4 ... up to this many steps.
 constexpr int kLockedMaxBackoff = 64;
 
+// The reduced problem (A_r, b_r) from M's upper triangle and J (m x nv, column-major), NF the number
+// of free coordinates (or Eigen::Dynamic): M_FF = L L^T, Z = L^-1 J_CF^T (column r: contact row r),
+// A_r = Z^T Z (its lower triangle, mirrored: exactly symmetric), y = L^-1 M_FL x_L and
+// b_r = h b_C + Z^T y - J_CL x_L. Leaves x = [0; x_L] in lk.x. False when M_FF is not positive
+// definite or a value is not finite. (Per contact row, its column of Z in registers: on Solo-12 the
+// loops over a runtime size of 6 were latency-bound, ~1.5 us for ~1k multiply-adds.)
+template <int NF>
+bool reducedOperator(LockedJoints& lk, const Eigen::MatrixXd& M, const Eigen::MatrixXd& J, Eigen::Index mc,
+                     const std::vector<JointRow>& joint_rows, double h, const Eigen::VectorXd& b) {
+  using MatF = Eigen::Matrix<double, NF, NF>;
+  using VecF = Eigen::Matrix<double, NF, 1>;
+  // (NF fixed: the loops over it unroll)
+  const Eigen::Index nf = NF == Eigen::Dynamic ? static_cast<Eigen::Index>(lk.free.size()) : NF;
+  const Eigen::Index nv = M.rows(), m = J.rows(), nj = static_cast<Eigen::Index>(joint_rows.size());
+  const int* F = lk.free.data();
+  const double* Mp = M.data();
+  const double* Jp = J.data();  // J(r, c) at c * m + r
+  MatF L(nf, nf);
+  for (Eigen::Index j = 0; j < nf; ++j)
+    for (Eigen::Index i = j; i < nf; ++i) L(i, j) = F[i] <= F[j] ? Mp[F[j] * nv + F[i]] : Mp[F[i] * nv + F[j]];
+  // L L^T in place (lower triangle), with the pivots' reciprocals
+  VecF inv(nf);
+  for (Eigen::Index j = 0; j < nf; ++j) {
+    double d = L(j, j);
+    for (Eigen::Index k = 0; k < j; ++k) d -= L(j, k) * L(j, k);
+    if (!(d > 0.0)) return false;
+    L(j, j) = std::sqrt(d);
+    inv[j] = 1.0 / L(j, j);
+    for (Eigen::Index i = j + 1; i < nf; ++i) {
+      double s = L(i, j);
+      for (Eigen::Index k = 0; k < j; ++k) s -= L(i, k) * L(j, k);
+      L(i, j) = s * inv[j];
+    }
+  }
+  // Zt = J_CF L^-T (mc x nf by columns: Z = L^-1 J_CF^T transposed), column a of Zt once the columns
+  // before it are final: each update runs along the contact rows (independent, vectorized), where a
+  // substitution per contact row was one chain of dependent multiply-adds
+  lk.z.resize(mc, nf);
+  double* Zp = lk.z.data();  // Zt(r, a) at a * mc + r
+  for (Eigen::Index a = 0; a < nf; ++a) {
+    double* za = Zp + a * mc;
+    const double* ja = Jp + F[a] * m;
+    for (Eigen::Index r = 0; r < mc; ++r) za[r] = ja[r];
+    for (Eigen::Index k = 0; k < a; ++k) {
+      const double l = L(a, k);
+      const double* zk = Zp + k * mc;
+      for (Eigen::Index r = 0; r < mc; ++r) za[r] -= l * zk[r];
+    }
+    for (Eigen::Index r = 0; r < mc; ++r) za[r] *= inv[a];
+  }
+  // x = [0; x_L]; M x = [M_FL x_L; M_LL x_L] (Eigen's symmetric product on M's upper triangle)
+  lk.x.setZero(nv);
+  for (Eigen::Index k = 0; k < nj; ++k) lk.x[joint_rows[k].dof] = lk.xl[k];
+  lk.mx.noalias() = M.selfadjointView<Eigen::Upper>() * lk.x;
+  VecF y(nf);
+  for (Eigen::Index a = 0; a < nf; ++a) {
+    double s = lk.mx[F[a]];
+    for (Eigen::Index k = 0; k < a; ++k) s -= L(a, k) * y[k];
+    y[a] = s * inv[a];
+  }
+  lk.y = y;
+  lk.mff = L;  // (for x_F after the solve)
+  // A_r = Zt Zt^T: column c along the rows r (the sum over the nf columns of Zt in registers), then
+  // the lower triangle mirrored (exactly symmetric)
+  lk.a.resize(mc, mc);
+  double* Ap = lk.a.data();
+  for (Eigen::Index c = 0; c < mc; ++c) {
+    VecF zc(nf);
+    for (Eigen::Index a = 0; a < nf; ++a) zc[a] = Zp[a * mc + c];
+    double* ac = Ap + c * mc;
+    for (Eigen::Index r = 0; r < mc; ++r) {
+      double s = 0.0;
+      for (Eigen::Index a = 0; a < nf; ++a) s += Zp[a * mc + r] * zc[a];
+      ac[r] = s;
+    }
+  }
+  for (Eigen::Index c = 0; c < mc; ++c)
+    for (Eigen::Index r = c + 1; r < mc; ++r) Ap[r * mc + c] = Ap[c * mc + r];
+  // b_r = h b_C + Z^T y - J_C x (J_C x = J_CL x_L)
+  lk.b.noalias() = J.topRows(mc) * lk.x;
+  lk.b = h * b.head(mc) - lk.b;
+  lk.b.noalias() += lk.z * lk.y;
+  // (x * 0 sums to 0 exactly unless some x is inf or NaN)
+  return !std::isnan((lk.a.array() * 0.0).sum() + (lk.b.array() * 0.0).sum() + (lk.z.array() * 0.0).sum());
+}
+
 bool missed(LockedJoints& lk) {
   lk.backoff = std::min(kLockedMaxBackoff, 2 * lk.backoff + 1);
   lk.skip = lk.backoff;
@@ -73,82 +159,12 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
     if (!lk.locked[static_cast<std::size_t>(i)]) lk.free.push_back(i);
   const auto nf = static_cast<Eigen::Index>(lk.free.size());
   if (nf == 0) return false;
-  const int* F = lk.free.data();
-  // (raw loops: at these sizes, 6 free coordinates and 12 contact rows on a legged robot, Eigen's
-  // dynamic-size triangular solves and products cost several times their arithmetic)
-  const double* Mp = M.data();
-  const auto mass = [Mp, nv](int i, int j) { return i <= j ? Mp[j * nv + i] : Mp[i * nv + j]; };  // (upper triangle)
-  const double* Jp = J.data();  // J(r, c) at c * m + r
-  // M_FF = L L^T (L's lower triangle by columns in mff)
-  lk.mff.resize(nf, nf);
-  double* Lp = lk.mff.data();
-  for (Eigen::Index j = 0; j < nf; ++j) {
-    double d = mass(F[j], F[j]);
-    for (Eigen::Index k = 0; k < j; ++k) d -= Lp[k * nf + j] * Lp[k * nf + j];
-    if (!(d > 0.0)) return false;
-    d = std::sqrt(d);
-    Lp[j * nf + j] = d;
-    for (Eigen::Index i = j + 1; i < nf; ++i) {
-      double s = mass(F[i], F[j]);
-      for (Eigen::Index k = 0; k < j; ++k) s -= Lp[k * nf + i] * Lp[k * nf + j];
-      Lp[j * nf + i] = s / d;
-    }
-  }
-
-  // x_L = h b_J; Zt = J_CF L^-T (Z = L^-1 J_CF^T transposed: mc x nf by columns, so that the loops
-  // below run along the contact rows, independent sums, rather than along short dependent ones)
   lk.xl.resize(nj);
   for (Eigen::Index k = 0; k < nj; ++k) lk.xl[k] = h * sd.out.b[mc + k];
-  lk.z.resize(mc, nf);
-  double* Zp = lk.z.data();  // Zt(r, a) at a * mc + r
-  for (Eigen::Index a = 0; a < nf; ++a) {
-    double* za = Zp + a * mc;
-    const double* ja = Jp + F[a] * m;
-    for (Eigen::Index r = 0; r < mc; ++r) za[r] = ja[r];
-    for (Eigen::Index k = 0; k < a; ++k) {
-      const double l = Lp[k * nf + a];
-      const double* zk = Zp + k * mc;
-      for (Eigen::Index r = 0; r < mc; ++r) za[r] -= l * zk[r];
-    }
-    const double d = 1.0 / Lp[a * nf + a];
-    for (Eigen::Index r = 0; r < mc; ++r) za[r] *= d;
-  }
-  // y = L^-1 M_FL x_L, from M [0; x_L] = [M_FL x_L; M_LL x_L]
-  lk.x.setZero(nv);
-  for (Eigen::Index k = 0; k < nj; ++k) lk.x[joint_rows[k].dof] = lk.xl[k];
-  lk.msym = M.selfadjointView<Eigen::Upper>();  // (M's upper triangle is the one written)
-  lk.mx.noalias() = lk.msym * lk.x;
-  lk.y.resize(nf);
-  for (Eigen::Index a = 0; a < nf; ++a) {
-    double s = lk.mx[F[a]];
-    for (Eigen::Index k = 0; k < a; ++k) s -= Lp[k * nf + a] * lk.y[k];
-    lk.y[a] = s / Lp[a * nf + a];
-  }
-  // A_r = Z^T Z: its lower triangle entry by entry, mirrored (exactly symmetric)
-  lk.a.resize(mc, mc);
-  double* Ap = lk.a.data();
-  for (Eigen::Index c = 0; c < mc; ++c)
-    for (Eigen::Index r = c; r < mc; ++r) {
-      double s = 0.0;
-      for (Eigen::Index a = 0; a < nf; ++a) s += Zp[a * mc + r] * Zp[a * mc + c];
-      Ap[c * mc + r] = Ap[r * mc + c] = s;
-    }
-  // b_r = h b_C + Z^T y - J_CL x_L
-  lk.b = h * sd.out.b.head(mc);
-  double* bp = lk.b.data();
-  for (Eigen::Index a = 0; a < nf; ++a) {
-    const double* za = Zp + a * mc;
-    const double ya = lk.y[a];
-    for (Eigen::Index r = 0; r < mc; ++r) bp[r] += za[r] * ya;
-  }
-  for (Eigen::Index k = 0; k < nj; ++k) {
-    const double* jk = Jp + joint_rows[k].dof * m;
-    const double xk = lk.xl[k];
-    for (Eigen::Index r = 0; r < mc; ++r) bp[r] -= jk[r] * xk;
-  }
-  // (x * 0 sums to 0 exactly unless some x is inf or NaN)
-  const bool finite = !std::isnan((lk.a.array() * 0.0).sum() + (lk.b.array() * 0.0).sum());
-  if (!finite) return false;  // (the full path says what diverged)
+  // (a floating base's 6 free coordinates: sizes known to the compiler, the loops unrolled)
+  const bool built = nf == 6 ? reducedOperator<6>(lk, M, J, mc, joint_rows, h, sd.out.b)
+                             : reducedOperator<Eigen::Dynamic>(lk, M, J, mc, joint_rows, h, sd.out.b);
+  if (!built) return false;  // (M_FF not positive definite, or a non-finite value: the full path says)
   watch.lap(sd.out.timings.delassus);
 
   // The contacts' problem: its operator updated in place while the contacts are the same
@@ -188,29 +204,23 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
     watch.lap(sd.out.timings.solve);
     return missed(lk);
   }
-  // x_F = L^-T (Z P_C - y)
-  const double* pc = rr.lam.data();
-  lk.xf.resize(nf);
-  for (Eigen::Index a = 0; a < nf; ++a) {
-    const double* za = Zp + a * mc;
-    double s = -lk.y[a];
-    for (Eigen::Index r = 0; r < mc; ++r) s += za[r] * pc[r];
-    lk.xf[a] = s;
-  }
+  // x_F = L^-T (Z P_C - y) (L^T x_F = Z P_C - y, L from M_FF's factor kept in lk.mff)
+  lk.xf.noalias() = lk.z.transpose() * rr.lam;
+  lk.xf -= lk.y;
   for (Eigen::Index a = nf - 1; a >= 0; --a) {
     double s = lk.xf[a];
-    for (Eigen::Index k = a + 1; k < nf; ++k) s -= Lp[a * nf + k] * lk.xf[k];
-    lk.xf[a] = s / Lp[a * nf + a];
+    for (Eigen::Index k = a + 1; k < nf; ++k) s -= lk.mff(k, a) * lk.xf[k];
+    lk.xf[a] = s / lk.mff(a, a);
   }
-  // x = [x_F; x_L] is M^-1 J^T P (the integration's velocity change); P_J = (M x)_L - J_CL^T P_C
+  // x = [x_F; x_L] is M^-1 J^T P (the integration's velocity change); P_J = (M x - J_C^T P_C)_L
+  const int* F = lk.free.data();
   for (Eigen::Index a = 0; a < nf; ++a) lk.x[F[a]] = lk.xf[a];
-  lk.mx.noalias() = lk.msym * lk.x;
+  lk.mx.noalias() = M.selfadjointView<Eigen::Upper>() * lk.x;
+  lk.mx.noalias() -= J.topRows(mc).transpose() * rr.lam;
   lk.pj.resize(nj);
   for (Eigen::Index k = 0; k < nj; ++k) {
     const int dof = joint_rows[k].dof;
-    const double* jcol = Jp + dof * m;
-    double s = lk.mx[dof];
-    for (Eigen::Index r = 0; r < mc; ++r) s -= jcol[r] * pc[r];
+    const double s = lk.mx[dof];
     const double limit = h * sim.joint_friction[dof];
     if (!(std::abs(s) <= (1.0 - kInsideBound) * limit)) {
       watch.lap(sd.out.timings.solve);
