@@ -40,14 +40,15 @@ constexpr int kLockedMaxBackoff = 64;
 // definite or a value is not finite. (Per contact row, its column of Z in registers: on Solo-12 the
 // loops over a runtime size of 6 were latency-bound, ~1.5 us for ~1k multiply-adds.)
 template <int NF>
-bool reducedOperator(LockedJoints& lk, const Eigen::MatrixXd& M, const Eigen::MatrixXd& J, Eigen::Index mc,
-                     const std::vector<JointRow>& joint_rows, double h, const Eigen::VectorXd& b) {
+bool reducedOperator(LockedJoints& lk, const Eigen::MatrixXd& M, const Eigen::MatrixXd& J, double h,
+                     const Eigen::VectorXd& b) {
   using MatF = Eigen::Matrix<double, NF, NF>;
   using VecF = Eigen::Matrix<double, NF, 1>;
   // (NF fixed: the loops over it unroll)
   const Eigen::Index nf = NF == Eigen::Dynamic ? static_cast<Eigen::Index>(lk.free.size()) : NF;
-  const Eigen::Index nv = M.rows(), m = J.rows(), nj = static_cast<Eigen::Index>(joint_rows.size());
+  const Eigen::Index nv = M.rows(), m = J.rows(), mc = static_cast<Eigen::Index>(lk.kept.size());
   const int* F = lk.free.data();
+  const int* R = lk.kept.data();  // the rows kept (mc of them: the contacts', then unlocked joints')
   const double* Mp = M.data();
   const double* Jp = J.data();  // J(r, c) at c * m + r
   MatF L(nf, nf);
@@ -75,7 +76,7 @@ bool reducedOperator(LockedJoints& lk, const Eigen::MatrixXd& M, const Eigen::Ma
   for (Eigen::Index a = 0; a < nf; ++a) {
     double* za = Zp + a * mc;
     const double* ja = Jp + F[a] * m;
-    for (Eigen::Index r = 0; r < mc; ++r) za[r] = ja[r];
+    for (Eigen::Index r = 0; r < mc; ++r) za[r] = ja[R[r]];
     for (Eigen::Index k = 0; k < a; ++k) {
       const double l = L(a, k);
       const double* zk = Zp + k * mc;
@@ -85,7 +86,7 @@ bool reducedOperator(LockedJoints& lk, const Eigen::MatrixXd& M, const Eigen::Ma
   }
   // x = [0; x_L]; M x = [M_FL x_L; M_LL x_L] (Eigen's symmetric product on M's upper triangle)
   lk.x.setZero(nv);
-  for (Eigen::Index k = 0; k < nj; ++k) lk.x[joint_rows[k].dof] = lk.xl[k];
+  for (std::size_t i = 0; i < lk.locked_dofs.size(); ++i) lk.x[lk.locked_dofs[i]] = lk.xl[static_cast<Eigen::Index>(i)];
   lk.mx.noalias() = M.selfadjointView<Eigen::Upper>() * lk.x;
   VecF y(nf);
   for (Eigen::Index a = 0; a < nf; ++a) {
@@ -111,9 +112,10 @@ bool reducedOperator(LockedJoints& lk, const Eigen::MatrixXd& M, const Eigen::Ma
   }
   for (Eigen::Index c = 0; c < mc; ++c)
     for (Eigen::Index r = c + 1; r < mc; ++r) Ap[r * mc + c] = Ap[c * mc + r];
-  // b_r = h b_C + Z^T y - J_C x (J_C x = J_CL x_L)
-  lk.b.noalias() = J.topRows(mc) * lk.x;
-  lk.b = h * b.head(mc) - lk.b;
+  // b_r = h b_R + Z^T y - J_R x (J_R x = J_RL x_L)
+  lk.jx.noalias() = J * lk.x;
+  lk.b.resize(mc);
+  for (Eigen::Index r = 0; r < mc; ++r) lk.b[r] = h * b[R[r]] - lk.jx[R[r]];
   lk.b.noalias() += lk.z * lk.y;
   // (x * 0 sums to 0 exactly unless some x is inf or NaN)
   return !std::isnan((lk.a.array() * 0.0).sum() + (lk.b.array() * 0.0).sum() + (lk.z.array() * 0.0).sum());
@@ -142,33 +144,49 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
   if (nj == 0 || mc <= 0 || !sim.anchors.empty() || sim.systems.size() != 1 || sim.systems[0].free_body ||
       sim.systems[0].pinocchio_passes || !w.solver->exactLaw() || !wholeWorldPart(sim, sd))
     return false;
-  for (const JointRow& r : joint_rows)
-    if (r.kind != JointRowKind::kFriction) return false;
   const SystemWork& part = w.parts[0];
   const Eigen::MatrixXd& M = part.data.M;
   const Eigen::MatrixXd& J = part.J;  // m x nv
   const Eigen::Index nv = J.cols();
   if (J.rows() != m || M.rows() != nv) return false;
+  // A coordinate whose only row is its dry friction is locked; every other joint row stays a row of
+  // the reduced problem (a limit, the friction of a joint on its limit), on the coordinates left free
+  lk.rows_on.assign(static_cast<std::size_t>(nv), 0);
+  for (const JointRow& r : joint_rows) ++lk.rows_on[static_cast<std::size_t>(r.dof)];
   lk.locked.assign(static_cast<std::size_t>(nv), 0);
-  for (const JointRow& r : joint_rows) {
-    if (lk.locked[static_cast<std::size_t>(r.dof)]) return false;
-    lk.locked[static_cast<std::size_t>(r.dof)] = 1;
+  lk.kept.clear();
+  lk.locked_rows.clear();
+  lk.locked_dofs.clear();
+  for (Eigen::Index r = 0; r < mc; ++r) lk.kept.push_back(static_cast<int>(r));
+  for (Eigen::Index k = 0; k < nj; ++k) {
+    const JointRow& r = joint_rows[static_cast<std::size_t>(k)];
+    if (r.kind == JointRowKind::kEffort) return false;  // (its compliance joins A after the Delassus stage)
+    if (r.kind == JointRowKind::kFriction && lk.rows_on[static_cast<std::size_t>(r.dof)] == 1) {
+      lk.locked[static_cast<std::size_t>(r.dof)] = 1;
+      lk.locked_rows.push_back(static_cast<int>(k));
+      lk.locked_dofs.push_back(r.dof);
+    } else {
+      lk.kept.push_back(static_cast<int>(mc + k));
+    }
   }
+  const auto nl = static_cast<Eigen::Index>(lk.locked_rows.size());
+  if (nl == 0) return false;
   lk.free.clear();
   for (int i = 0; i < nv; ++i)
     if (!lk.locked[static_cast<std::size_t>(i)]) lk.free.push_back(i);
   const auto nf = static_cast<Eigen::Index>(lk.free.size());
   if (nf == 0) return false;
-  lk.xl.resize(nj);
-  for (Eigen::Index k = 0; k < nj; ++k) lk.xl[k] = h * sd.out.b[mc + k];
+  const auto mr = static_cast<Eigen::Index>(lk.kept.size());
+  lk.xl.resize(nl);
+  for (Eigen::Index i = 0; i < nl; ++i) lk.xl[i] = h * sd.out.b[mc + lk.locked_rows[static_cast<std::size_t>(i)]];
   // (a floating base's 6 free coordinates: sizes known to the compiler, the loops unrolled)
-  const bool built = nf == 6 ? reducedOperator<6>(lk, M, J, mc, joint_rows, h, sd.out.b)
-                             : reducedOperator<Eigen::Dynamic>(lk, M, J, mc, joint_rows, h, sd.out.b);
+  const bool built = nf == 6 ? reducedOperator<6>(lk, M, J, h, sd.out.b)
+                             : reducedOperator<Eigen::Dynamic>(lk, M, J, h, sd.out.b);
   if (!built) return false;  // (M_FF not positive definite, or a non-finite value: the full path says)
   watch.lap(sd.out.timings.delassus);
 
-  // The contacts' problem: its operator updated in place while the contacts are the same
-  if (!lk.problem || lk.active != sd.out.active) {
+  // The reduced problem: its operator updated in place while the contacts and joint rows are the same
+  if (!lk.problem || lk.active != sd.out.active || lk.joint_rows != joint_rows) {
     std::vector<Constraint> cons;
     for (int i : sd.out.active)
       switch (sd.out.candidate_rows[i]) {
@@ -176,9 +194,12 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
         case 2: cons.push_back(Constraint::planarFriction(candidateMu(sim, i))); break;
         default: cons.push_back(Constraint::spatialFriction(candidateMu(sim, i)));
       }
+    for (Eigen::Index r = mc; r < mr; ++r)
+      cons.push_back(jointRowConstraint(sim, sd, static_cast<std::size_t>(lk.kept[static_cast<std::size_t>(r)] - mc), h));
     lk.delassus = std::make_shared<DenseDelassus>(lk.a);
     lk.problem = std::make_unique<ContactProblem>(lk.delassus, lk.b, std::move(cons), 1e-6, false);
     lk.active = sd.out.active;
+    lk.joint_rows = joint_rows;
   } else {
     lk.delassus->matrix() = lk.a;
     lk.problem->setB(lk.b);
@@ -191,7 +212,8 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
   SolverSettings settings = sim.settings.solver_settings;
   settings.measure_exact_law = false;
   const bool any = stepGuess(sim, sd, h, /*exact=*/true);
-  lk.guess = w.guess.head(mc);
+  lk.guess.resize(mr);
+  for (Eigen::Index r = 0; r < mr; ++r) lk.guess[r] = w.guess[lk.kept[static_cast<std::size_t>(r)]];
   settings.warm_start = sim.settings.warm_start && any ? WarmStart::kGiven : WarmStart::kNone;
   solve(*lk.problem, *lk.solver, settings, lk.result, &lk.guess);
   const SolverResult& rr = lk.result;
@@ -204,7 +226,7 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
     watch.lap(sd.out.timings.solve);
     return missed(lk);
   }
-  // x_F = L^-T (Z P_C - y) (L^T x_F = Z P_C - y, L from M_FF's factor kept in lk.mff)
+  // x_F = L^-T (Z P_R - y) (L^T x_F = Z P_R - y, L from M_FF's factor kept in lk.mff)
   lk.xf.noalias() = lk.z.transpose() * rr.lam;
   lk.xf -= lk.y;
   for (Eigen::Index a = nf - 1; a >= 0; --a) {
@@ -212,33 +234,51 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
     for (Eigen::Index k = a + 1; k < nf; ++k) s -= lk.mff(k, a) * lk.xf[k];
     lk.xf[a] = s / lk.mff(a, a);
   }
-  // x = [x_F; x_L] is M^-1 J^T P (the integration's velocity change); P_J = (M x - J_C^T P_C)_L
+  // x = [x_F; x_L] is M^-1 J^T P (the integration's velocity change); P_L = (M x - J_R^T P_R)_L,
+  // each locked row's friction within its bound
   const int* F = lk.free.data();
   for (Eigen::Index a = 0; a < nf; ++a) lk.x[F[a]] = lk.xf[a];
   lk.mx.noalias() = M.selfadjointView<Eigen::Upper>() * lk.x;
-  lk.mx.noalias() -= J.topRows(mc).transpose() * rr.lam;
-  lk.pj.resize(nj);
-  for (Eigen::Index k = 0; k < nj; ++k) {
-    const int dof = joint_rows[k].dof;
+  lk.pfull.setZero(m);
+  for (Eigen::Index r = 0; r < mr; ++r) lk.pfull[lk.kept[static_cast<std::size_t>(r)]] = rr.lam[r];
+  lk.mx.noalias() -= J.transpose() * lk.pfull;
+  lk.pj.resize(nl);
+  for (Eigen::Index i = 0; i < nl; ++i) {
+    const int dof = lk.locked_dofs[static_cast<std::size_t>(i)];
     const double s = lk.mx[dof];
     const double limit = h * sim.joint_friction[dof];
     if (!(std::abs(s) <= (1.0 - kInsideBound) * limit)) {
       watch.lap(sd.out.timings.solve);
       return missed(lk);
     }
-    lk.pj[k] = s;
+    lk.pj[i] = s;
   }
   lk.backoff = 0;
-  // The full problem's result: the contacts' from the reduced solve, the friction rows sticking (u = 0)
+  // The full problem's result: the kept rows' from the reduced solve, the locked rows sticking (u = 0)
   SolverResult& r = sd.out.result;
-  const std::size_t contact_blocks = rr.states.size();
+  const std::size_t contact_blocks = sd.out.active.size();
   r.resize(m, contact_blocks + static_cast<std::size_t>(nj));
-  r.lam.head(mc) = rr.lam;
-  r.lam.tail(nj) = lk.pj;
-  r.u.head(mc) = rr.u;
-  r.u.tail(nj).setZero();
-  std::copy(rr.states.begin(), rr.states.end(), r.states.begin());
-  std::fill(r.states.begin() + static_cast<std::ptrdiff_t>(contact_blocks), r.states.end(), ContactState::kStick);
+  for (Eigen::Index k = 0; k < mr; ++k) {
+    r.lam[lk.kept[static_cast<std::size_t>(k)]] = rr.lam[k];
+    r.u[lk.kept[static_cast<std::size_t>(k)]] = rr.u[k];
+  }
+  for (Eigen::Index i = 0; i < nl; ++i) {
+    r.lam[mc + lk.locked_rows[static_cast<std::size_t>(i)]] = lk.pj[i];
+    r.u[mc + lk.locked_rows[static_cast<std::size_t>(i)]] = 0.0;
+  }
+  std::copy(rr.states.begin(), rr.states.begin() + static_cast<std::ptrdiff_t>(contact_blocks), r.states.begin());
+  for (std::size_t k = 0, kept = contact_blocks; k < static_cast<std::size_t>(nj); ++k) {
+    const std::size_t blk = contact_blocks + k;
+    if (lk.locked[static_cast<std::size_t>(joint_rows[k].dof)] != 0) {
+      r.states[blk] = ContactState::kStick;
+      continue;
+    }
+    r.states[blk] = rr.states[kept++];
+    // a kept box row that slips holds its bound exactly (as solveContacts sets it)
+    const Constraint c = jointRowConstraint(sim, sd, k, h);
+    const Eigen::Index row = mc + static_cast<Eigen::Index>(k);
+    if (c.kind == ConstraintKind::kBox && r.states[blk] == ContactState::kSlip) r.lam[row] = r.u[row] < 0.0 ? c.upper : c.lower;
+  }
   r.iterations = rr.iterations;
   r.converged = true;
   r.status = SolveStatus::kConverged;

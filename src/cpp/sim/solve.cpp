@@ -211,13 +211,21 @@ void recordSolution(const SimulatorModel& sim, SimulatorData& sd, double scale, 
   sd.out.max_residual_step = std::max(sd.out.max_residual_step, sd.out.result.residual);
   sd.out.all_converged_step = sd.out.all_converged_step && sd.out.result.own_converged;
   sd.out.iterations_step += solve_iterations;
-  // Every joint row a friction row, all holding: the next step tries them locked first (locked_joints.cpp)
+  // The friction rows that are their coordinate's only row all holding: the next step tries those
+  // joints locked first (locked_joints.cpp)
   const std::size_t first_joint_block = sd.out.active.size() + sim.anchors.size();
-  bool held = exact && !sd.out.joint_rows.empty() &&
-              sd.out.result.states.size() == first_joint_block + sd.out.joint_rows.size();
-  for (std::size_t k = 0; held && k < sd.out.joint_rows.size(); ++k)
-    held = sd.out.joint_rows[k].kind == JointRowKind::kFriction &&
-           sd.out.result.states[first_joint_block + k] == ContactState::kStick;
+  bool held = exact && sd.out.result.states.size() == first_joint_block + sd.out.joint_rows.size();
+  std::vector<int>& rows_on = sd.work->locked.rows_on;
+  rows_on.assign(static_cast<std::size_t>(sim.model.nv), 0);
+  for (const JointRow& r : sd.out.joint_rows) ++rows_on[static_cast<std::size_t>(r.dof)];
+  bool any_lockable = false;
+  for (std::size_t k = 0; held && k < sd.out.joint_rows.size(); ++k) {
+    const JointRow& r = sd.out.joint_rows[k];
+    if (r.kind != JointRowKind::kFriction || rows_on[static_cast<std::size_t>(r.dof)] != 1) continue;
+    any_lockable = true;
+    held = sd.out.result.states[first_joint_block + k] == ContactState::kStick;
+  }
+  held = held && any_lockable;
   sd.work->locked.held = held;
 }
 

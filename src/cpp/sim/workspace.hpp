@@ -93,12 +93,16 @@ struct LockedJoints {
   bool pending_full = false;          ///< this step's full A and problem not built yet (completeLockedStep)
   const SimulatorModel* sim = nullptr;  ///< the model of that step (for completeLockedStep)
   double scale = 0.0;                 ///< that step's h
-  std::vector<char> locked;           ///< per coordinate: it has a friction row (locked)
-  std::vector<int> free;              ///< the coordinates without one
+  std::vector<char> locked;           ///< per coordinate: locked (its only joint row is its dry friction)
+  std::vector<int> free;              ///< the coordinates not locked
+  std::vector<int> rows_on;           ///< per coordinate: its joint rows (scratch)
+  std::vector<int> kept;              ///< the full problem's rows in the reduced one: contacts, unlocked joints'
+  std::vector<int> locked_rows, locked_dofs;  ///< the locked joint rows (index among the joint rows), their coordinates
+  std::vector<JointRow> joint_rows;   ///< the joint rows `problem` was built for
   Eigen::MatrixXd mff, z, a;          ///< M_FF = L L^T (L), J_CF L^-T, the reduced A = Z^T Z
   Eigen::VectorXd xl, y, xf, b, guess, pj;
   Eigen::VectorXd x;   ///< M^-1 J^T P of the step it solved (integrateTimeStep reads it)
-  Eigen::VectorXd mx;  ///< M x (scratch)
+  Eigen::VectorXd mx, jx, pfull;  ///< M x, J x, P on the full problem's rows (scratch)
   Eigen::MatrixXd msym;  ///< M, both triangles
   std::shared_ptr<DenseDelassus> delassus;
   std::unique_ptr<ContactProblem> problem;
