@@ -112,10 +112,13 @@ bool reducedOperator(LockedJoints& lk, const Eigen::MatrixXd& M, const Eigen::Ma
   }
   for (Eigen::Index c = 0; c < mc; ++c)
     for (Eigen::Index r = c + 1; r < mc; ++r) Ap[r * mc + c] = Ap[c * mc + r];
-  // b_r = h b_R + Z^T y - J_R x (J_R x = J_RL x_L)
-  lk.jx.noalias() = J * lk.x;
+  // b_r = h b_R + Z^T y - J_R x (J_R x = J_CL x_L on the contacts' rows, the first; 0 on a kept joint
+  // row, whose coordinate is free)
+  const Eigen::Index contacts = lk.contact_rows;
+  lk.jx.noalias() = J.topRows(contacts) * lk.x;
   lk.b.resize(mc);
-  for (Eigen::Index r = 0; r < mc; ++r) lk.b[r] = h * b[R[r]] - lk.jx[R[r]];
+  for (Eigen::Index r = 0; r < contacts; ++r) lk.b[r] = h * b[r] - lk.jx[r];
+  for (Eigen::Index r = contacts; r < mc; ++r) lk.b[r] = h * b[R[r]];
   lk.b.noalias() += lk.z * lk.y;
   // (x * 0 sums to 0 exactly unless some x is inf or NaN)
   return !std::isnan((lk.a.array() * 0.0).sum() + (lk.b.array() * 0.0).sum() + (lk.z.array() * 0.0).sum());
@@ -150,30 +153,36 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
   const Eigen::Index nv = J.cols();
   if (J.rows() != m || M.rows() != nv) return false;
   // A coordinate whose only row is its dry friction is locked; every other joint row stays a row of
-  // the reduced problem (a limit, the friction of a joint on its limit), on the coordinates left free
-  lk.rows_on.assign(static_cast<std::size_t>(nv), 0);
-  for (const JointRow& r : joint_rows) ++lk.rows_on[static_cast<std::size_t>(r.dof)];
-  lk.locked.assign(static_cast<std::size_t>(nv), 0);
-  lk.kept.clear();
-  lk.locked_rows.clear();
-  lk.locked_dofs.clear();
-  for (Eigen::Index r = 0; r < mc; ++r) lk.kept.push_back(static_cast<int>(r));
-  for (Eigen::Index k = 0; k < nj; ++k) {
-    const JointRow& r = joint_rows[static_cast<std::size_t>(k)];
-    if (r.kind == JointRowKind::kEffort) return false;  // (its compliance joins A after the Delassus stage)
-    if (r.kind == JointRowKind::kFriction && lk.rows_on[static_cast<std::size_t>(r.dof)] == 1) {
-      lk.locked[static_cast<std::size_t>(r.dof)] = 1;
-      lk.locked_rows.push_back(static_cast<int>(k));
-      lk.locked_dofs.push_back(r.dof);
-    } else {
-      lk.kept.push_back(static_cast<int>(mc + k));
+  // the reduced problem (a limit, the friction of a joint on its limit), on the coordinates left free.
+  // (Classified again when the rows change.)
+  if (lk.contact_rows != mc || lk.classified != joint_rows) {
+    lk.rows_on.assign(static_cast<std::size_t>(nv), 0);
+    for (const JointRow& r : joint_rows) ++lk.rows_on[static_cast<std::size_t>(r.dof)];
+    lk.locked.assign(static_cast<std::size_t>(nv), 0);
+    lk.kept.clear();
+    lk.locked_rows.clear();
+    lk.locked_dofs.clear();
+    lk.contact_rows = -1;
+    for (Eigen::Index r = 0; r < mc; ++r) lk.kept.push_back(static_cast<int>(r));
+    for (Eigen::Index k = 0; k < nj; ++k) {
+      const JointRow& r = joint_rows[static_cast<std::size_t>(k)];
+      if (r.kind == JointRowKind::kEffort) return false;  // (its compliance joins A after the Delassus stage)
+      if (r.kind == JointRowKind::kFriction && lk.rows_on[static_cast<std::size_t>(r.dof)] == 1) {
+        lk.locked[static_cast<std::size_t>(r.dof)] = 1;
+        lk.locked_rows.push_back(static_cast<int>(k));
+        lk.locked_dofs.push_back(r.dof);
+      } else {
+        lk.kept.push_back(static_cast<int>(mc + k));
+      }
     }
+    lk.free.clear();
+    for (int i = 0; i < nv; ++i)
+      if (!lk.locked[static_cast<std::size_t>(i)]) lk.free.push_back(i);
+    lk.contact_rows = mc;
+    lk.classified = joint_rows;
   }
   const auto nl = static_cast<Eigen::Index>(lk.locked_rows.size());
   if (nl == 0) return false;
-  lk.free.clear();
-  for (int i = 0; i < nv; ++i)
-    if (!lk.locked[static_cast<std::size_t>(i)]) lk.free.push_back(i);
   const auto nf = static_cast<Eigen::Index>(lk.free.size());
   if (nf == 0) return false;
   const auto mr = static_cast<Eigen::Index>(lk.kept.size());

@@ -99,6 +99,8 @@ struct LockedJoints {
   std::vector<int> kept;              ///< the full problem's rows in the reduced one: contacts, unlocked joints'
   std::vector<int> locked_rows, locked_dofs;  ///< the locked joint rows (index among the joint rows), their coordinates
   std::vector<JointRow> joint_rows;   ///< the joint rows `problem` was built for
+  std::vector<JointRow> classified;   ///< the joint rows locked, kept and free were sorted for
+  Eigen::Index contact_rows = -1;     ///< with this many contact rows before them
   Eigen::MatrixXd mff, z, a;          ///< M_FF = L L^T (L), J_CF L^-T, the reduced A = Z^T Z
   Eigen::VectorXd xl, y, xf, b, guess, pj;
   Eigen::VectorXd x;   ///< M^-1 J^T P of the step it solved (integrateTimeStep reads it)
