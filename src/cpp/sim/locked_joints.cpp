@@ -21,6 +21,9 @@
 #include <algorithm>
 #include <cmath>
 
+#include <Eigen/Cholesky>
+#include <Eigen/QR>
+
 #include "stages.hpp"
 
 namespace stiction {
@@ -124,6 +127,61 @@ bool reducedOperator(LockedJoints& lk, const Eigen::MatrixXd& M, const Eigen::Ma
   return !std::isnan((lk.a.array() * 0.0).sum() + (lk.b.array() * 0.0).sum() + (lk.z.array() * 0.0).sum());
 }
 
+// The all-stick answers of the step form a family: forces between sticking feet that move nothing
+// (the null space of J_SF^T, S the sticking contacts' rows), which the joints' friction balances. The
+// reduced solve picks one from its warm start, not knowing the joints' bounds; this moves P_S along
+// that null space to the smallest locked friction impulses, min |P_L - G d|^2 (+ a 1e-10 regulariser),
+// G = J_SL^T (M x does not change: J_SF^T d = 0). Kept when every sticking contact stays strictly in its
+// cone and the reduced problem's natural map still meets the tolerance; u_R is then recomputed.
+bool rebalance(const SimulatorModel& sim, SimulatorData& sd, LockedJoints& lk, double h, double threshold) {
+  SolverResult& rr = lk.result;
+  const Eigen::MatrixXd& J = sd.work->parts[0].J;
+  std::vector<int>& S = lk.sticking_rows;
+  S.clear();
+  std::vector<std::size_t> blocks;
+  Eigen::Index row = 0;
+  for (std::size_t blk = 0; blk < sd.out.active.size(); ++blk) {
+    const int k = sd.out.candidate_rows[sd.out.active[blk]];
+    if (k == 3 && rr.states[blk] == ContactState::kStick) {
+      blocks.push_back(blk);
+      for (int q = 0; q < k; ++q) S.push_back(static_cast<int>(row + q));
+    }
+    row += k;
+  }
+  const auto ms = static_cast<Eigen::Index>(S.size()), nf = static_cast<Eigen::Index>(lk.free.size()),
+             nl = static_cast<Eigen::Index>(lk.locked_dofs.size());
+  if (ms <= nf) return false;
+  Eigen::MatrixXd N(ms, nf), G(nl, ms);
+  for (Eigen::Index s = 0; s < ms; ++s) {
+    for (Eigen::Index a = 0; a < nf; ++a) N(s, a) = J(S[s], lk.free[a]);
+    for (Eigen::Index i = 0; i < nl; ++i) G(i, s) = J(S[s], lk.locked_dofs[i]);
+  }
+  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(N);
+  const Eigen::MatrixXd Q = qr.householderQ();
+  const Eigen::MatrixXd B = Q.rightCols(ms - nf);  // orthogonal to J_SF's columns
+  const Eigen::MatrixXd GB = G * B;
+  Eigen::MatrixXd H = GB.transpose() * GB;
+  H.diagonal().array() += 1e-10 * (H.trace() / double(H.rows()) + 1e-300);
+  const Eigen::VectorXd xi = H.ldlt().solve(GB.transpose() * lk.pj);
+  const Eigen::VectorXd d = B * xi;
+  if (!d.allFinite()) return false;
+  Eigen::VectorXd lam = rr.lam;
+  for (Eigen::Index s = 0; s < ms; ++s) lam[S[s]] += d[s];
+  for (std::size_t blk : blocks) {  // strictly inside the cone still
+    Eigen::Index o = 0;
+    for (std::size_t b = 0; b < blk; ++b) o += sd.out.candidate_rows[sd.out.active[b]];
+    const double mu = candidateMu(sim, sd.out.active[blk]);
+    if (!(lam[o + 2] > 0.0 && std::hypot(lam[o], lam[o + 1]) < (1.0 - kInsideBound) * mu * lam[o + 2])) return false;
+  }
+  // the reduced problem's natural map at the new forces
+  const double nm = residual(*lk.problem, lam) * (1.0 + lk.problem->bNorm());
+  if (!(nm <= 0.5 * threshold)) return false;
+  rr.lam = lam;
+  lk.delassus->multiply(rr.lam, rr.u);
+  rr.u -= lk.problem->b();
+  return true;
+}
+
 bool missed(LockedJoints& lk) {
   lk.backoff = std::min(kLockedMaxBackoff, 2 * lk.backoff + 1);
   lk.skip = lk.backoff;
@@ -225,7 +283,7 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
   for (Eigen::Index r = 0; r < mr; ++r) lk.guess[r] = w.guess[lk.kept[static_cast<std::size_t>(r)]];
   settings.warm_start = sim.settings.warm_start && any ? WarmStart::kGiven : WarmStart::kNone;
   solve(*lk.problem, *lk.solver, settings, lk.result, &lk.guess);
-  const SolverResult& rr = lk.result;
+  SolverResult& rr = lk.result;
   // Judged against the full problem's b: its natural map is the reduced one's (u_J = 0)
   const double full_b = h * sd.out.b.norm();
   const double full_scale = full_b > 0.0 ? full_b : 1.0;
@@ -235,32 +293,37 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
     watch.lap(sd.out.timings.solve);
     return missed(lk);
   }
-  // x_F = L^-T (Z P_R - y) (L^T x_F = Z P_R - y, L from M_FF's factor kept in lk.mff)
-  lk.xf.noalias() = lk.z.transpose() * rr.lam;
-  lk.xf -= lk.y;
-  for (Eigen::Index a = nf - 1; a >= 0; --a) {
-    double s = lk.xf[a];
-    for (Eigen::Index k = a + 1; k < nf; ++k) s -= lk.mff(k, a) * lk.xf[k];
-    lk.xf[a] = s / lk.mff(a, a);
-  }
-  // x = [x_F; x_L] is M^-1 J^T P (the integration's velocity change); P_L = (M x - J_R^T P_R)_L,
-  // each locked row's friction within its bound
+  // x_F = L^-T (Z P_R - y) (L^T x_F = Z P_R - y, L from M_FF's factor kept in lk.mff); x = [x_F; x_L]
+  // is M^-1 J^T P (the integration's velocity change); P_L = (M x - J_R^T P_R)_L
   const int* F = lk.free.data();
-  for (Eigen::Index a = 0; a < nf; ++a) lk.x[F[a]] = lk.xf[a];
-  lk.mx.noalias() = M.selfadjointView<Eigen::Upper>() * lk.x;
-  lk.pfull.setZero(m);
-  for (Eigen::Index r = 0; r < mr; ++r) lk.pfull[lk.kept[static_cast<std::size_t>(r)]] = rr.lam[r];
-  lk.mx.noalias() -= J.transpose() * lk.pfull;
-  lk.pj.resize(nl);
-  for (Eigen::Index i = 0; i < nl; ++i) {
-    const int dof = lk.locked_dofs[static_cast<std::size_t>(i)];
-    const double s = lk.mx[dof];
-    const double limit = h * sim.joint_friction[dof];
-    if (!(std::abs(s) <= (1.0 - kInsideBound) * limit)) {
-      watch.lap(sd.out.timings.solve);
-      return missed(lk);
+  const auto lockedImpulses = [&]() {
+    lk.xf.noalias() = lk.z.transpose() * rr.lam;
+    lk.xf -= lk.y;
+    for (Eigen::Index a = nf - 1; a >= 0; --a) {
+      double s = lk.xf[a];
+      for (Eigen::Index k = a + 1; k < nf; ++k) s -= lk.mff(k, a) * lk.xf[k];
+      lk.xf[a] = s / lk.mff(a, a);
     }
-    lk.pj[i] = s;
+    for (Eigen::Index a = 0; a < nf; ++a) lk.x[F[a]] = lk.xf[a];
+    lk.mx.noalias() = M.selfadjointView<Eigen::Upper>() * lk.x;
+    lk.pfull.setZero(m);
+    for (Eigen::Index r = 0; r < mr; ++r) lk.pfull[lk.kept[static_cast<std::size_t>(r)]] = rr.lam[r];
+    lk.mx.noalias() -= J.transpose() * lk.pfull;
+    lk.pj.resize(nl);
+    bool inside = true;
+    for (Eigen::Index i = 0; i < nl; ++i) {
+      const int dof = lk.locked_dofs[static_cast<std::size_t>(i)];
+      lk.pj[i] = lk.mx[dof];
+      inside = inside && std::abs(lk.pj[i]) <= (1.0 - kInsideBound) * h * sim.joint_friction[dof];
+    }
+    return inside;
+  };
+  // each locked row's friction within its bound; else the sticking contacts' internal forces chosen
+  // for the smallest friction torques (rebalance), and checked again
+  if (!lockedImpulses() &&
+      !(rebalance(sim, sd, lk, h, settings.tolerance * full_scale) && lockedImpulses())) {
+    watch.lap(sd.out.timings.solve);
+    return missed(lk);
   }
   lk.backoff = 0;
   // The full problem's result: the kept rows' from the reduced solve, the locked rows sticking (u = 0)

@@ -97,6 +97,7 @@ struct LockedJoints {
   std::vector<int> free;              ///< the coordinates not locked
   std::vector<int> rows_on;           ///< per coordinate: its joint rows (scratch)
   std::vector<int> kept;              ///< the full problem's rows in the reduced one: contacts, unlocked joints'
+  std::vector<int> sticking_rows;     ///< rebalance's: the sticking contacts' rows (scratch)
   std::vector<int> locked_rows, locked_dofs;  ///< the locked joint rows (index among the joint rows), their coordinates
   std::vector<JointRow> joint_rows;   ///< the joint rows `problem` was built for
   std::vector<JointRow> classified;   ///< the joint rows locked, kept and free were sorted for
