@@ -320,8 +320,9 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
   };
   // each locked row's friction within its bound; else the sticking contacts' internal forces chosen
   // for the smallest friction torques (rebalance), and checked again
+  bool rebalanced = false;
   if (!lockedImpulses() &&
-      !(rebalance(sim, sd, lk, h, settings.tolerance * full_scale) && lockedImpulses())) {
+      !((rebalanced = rebalance(sim, sd, lk, h, settings.tolerance * full_scale)) && lockedImpulses())) {
     watch.lap(sd.out.timings.solve);
     return missed(lk);
   }
@@ -368,7 +369,8 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
   // (swapped and assigned: no allocation once the strings have grown)
   std::swap(r.stages, lk.result.stages);
   r.solver.assign(rr.solver);
-  r.message.assign(rr.message).append(" (joints locked: their dry friction holds)");
+  r.message.assign(rr.message).append(rebalanced ? " (joints locked: their dry friction holds; rebalanced)"
+                                                  : " (joints locked: their dry friction holds)");
   r.own_converged = true;
   r.own_residual = r.relative_residual;
   r.own_law.assign(rr.own_law);
