@@ -87,13 +87,18 @@ bool reducedOperator(LockedJoints& lk, const Eigen::MatrixXd& M, const Eigen::Ma
     }
     for (Eigen::Index r = 0; r < mc; ++r) za[r] *= inv[a];
   }
-  // x = [0; x_L]; M x = [M_FL x_L; M_LL x_L] (Eigen's symmetric product on M's upper triangle)
+  // x = [0; x_L]; y = L^-1 M_FL x_L (M_FL from M's upper triangle)
   lk.x.setZero(nv);
   for (std::size_t i = 0; i < lk.locked_dofs.size(); ++i) lk.x[lk.locked_dofs[i]] = lk.xl[static_cast<Eigen::Index>(i)];
-  lk.mx.noalias() = M.selfadjointView<Eigen::Upper>() * lk.x;
-  VecF y(nf);
+  VecF y(nf);  // M_FL x_L, then L^-1 of it
+  y.setZero();
+  for (std::size_t i = 0; i < lk.locked_dofs.size(); ++i) {
+    const int l = lk.locked_dofs[i];
+    const double xl = lk.xl[static_cast<Eigen::Index>(i)];
+    for (Eigen::Index a = 0; a < nf; ++a) y[a] += (F[a] <= l ? Mp[l * nv + F[a]] : Mp[F[a] * nv + l]) * xl;
+  }
   for (Eigen::Index a = 0; a < nf; ++a) {
-    double s = lk.mx[F[a]];
+    double s = y[a];
     for (Eigen::Index k = 0; k < a; ++k) s -= L(a, k) * y[k];
     y[a] = s * inv[a];
   }
@@ -107,7 +112,7 @@ bool reducedOperator(LockedJoints& lk, const Eigen::MatrixXd& M, const Eigen::Ma
     VecF zc(nf);
     for (Eigen::Index a = 0; a < nf; ++a) zc[a] = Zp[a * mc + c];
     double* ac = Ap + c * mc;
-    for (Eigen::Index r = 0; r < mc; ++r) {
+    for (Eigen::Index r = c; r < mc; ++r) {  // (the lower triangle)
       double s = 0.0;
       for (Eigen::Index a = 0; a < nf; ++a) s += Zp[a * mc + r] * zc[a];
       ac[r] = s;
