@@ -223,6 +223,7 @@ double get_sensor_time(const SimulatorData& d) { return d.out.sensor_time; }
 // The last solve's result; its exact-law measures taken here (the step leaves them to whoever asks:
 // a robot's step spent ~4 % of its time on them), of the problem it solved, still in d.work->problem.
 SolverResult get_result(const SimulatorData& d) {
+  completeLockedStep(d);  // (a step with its joints locked left its full problem to whoever asks)
   SolverResult r = d.out.result;
   if (!r.exact_law_measured && d.work->problem && r.lam.size() == d.work->problem->numRows() && r.u.size() == r.lam.size()) {
     measureExactLaw(*d.work->problem, r.lam, r.exact_law, kRelativeSpeedFloor, &r.u);

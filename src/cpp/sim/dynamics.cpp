@@ -548,6 +548,7 @@ bool samePartRows(const SimulatorData& sd) {
 void delassusOperator(const SimulatorModel& sim, SimulatorData& sd) {
   const Eigen::Index rows = sd.out.rows;
   sd.work->robot_chains = false;
+  sd.work->locked.pending_full = false;  // (this step's A is built here: solveJointsLocked did not)
   if (wholeWorldPart(sim, sd) && !sim.systems[0].free_body && robotOperator(sim, sd)) {
     // one robot, each contact on one root path: A by the tree's chains (robot_delassus.cpp)
     sd.work->robot_chains = true;

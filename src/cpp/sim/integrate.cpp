@@ -90,9 +90,13 @@ void integrateTimeStep(const SimulatorModel& sim, SimulatorData& sd, double h) {
   sd.work->dv = h * sd.work->v_free;  // h M^-1 (tau - nle)
   addFrameTurn(sim, sd.v, h, sd.work->dv);
   sd.v += sd.work->dv;
-  if (sd.out.rows > 0) {  // + M^-1 J^T P
-    solveJacobianTransposed(sim, sd, sd.out.result.lam, sd.work->dv);
-    sd.v += sd.work->dv;
+  if (sd.out.rows > 0) {  // + M^-1 J^T P (the joints locked: their solve's x, locked_joints.cpp)
+    if (sd.work->locked.pending_full) {
+      sd.v += sd.work->locked.x;
+    } else {
+      solveJacobianTransposed(sim, sd, sd.out.result.lam, sd.work->dv);
+      sd.v += sd.work->dv;
+    }
     // contact velocities J(q_k) v+, in the frame the solve used
     multiplyJacobian(sim, sd, sd.v, sd.work->row_velocity);
   }

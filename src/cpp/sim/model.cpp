@@ -425,6 +425,7 @@ Eigen::MatrixXd denseMassMatrix(const SimulatorData& sd) {
 }
 
 Eigen::MatrixXd denseDelassus(const SimulatorData& sd) {
+  completeLockedStep(sd);  // (a step with its joints locked left A to whoever asks)
   if (sd.out.sparse)
     return Eigen::MatrixXd(sd.work->a_in_operator && sd.work->sparse_delassus ? sd.work->sparse_delassus->sparseMatrix() : sd.out.A_sparse);
   return sd.out.A;

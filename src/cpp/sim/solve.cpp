@@ -67,8 +67,7 @@ std::string unsolvableMessage(const SimulatorModel& sim, const SimulatorData& sd
 
 }  // namespace
 
-void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
-  const Eigen::Index rows = sd.out.rows;
+void setStepProblem(const SimulatorModel& sim, SimulatorData& sd, double scale) {
   // (x * 0 sums to 0 exactly unless some x is inf or NaN: a vectorised pass, where allFinite()
   // tested entry by entry, 3 % of a 256-contact tower's step)
   const auto all_finite = [](const double* x, Eigen::Index n) {
@@ -124,10 +123,10 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     sd.work->b_scaled = scale * sd.out.b;
     sd.work->problem->setB(sd.work->b_scaled);
   }
-  SolverSettings settings = sim.settings.solver_settings;
-  // (the exact-law measures of a step's answer when its result is read: get_result, Python)
-  settings.measure_exact_law = false;
-  const bool exact = sd.work->solver->exactLaw();
+}
+
+bool stepGuess(const SimulatorModel& sim, SimulatorData& sd, double scale, bool exact) {
+  const Eigen::Index rows = sd.out.rows;
   sd.work->guess.resize(rows);
   bool any = false;
   Eigen::Index row = 0;
@@ -160,6 +159,85 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     sd.work->guess[row] = jointRowGuess(sim, sd, k, scale);
     any = any || sd.work->guess[row] != 0.0;
   }
+  return any;
+}
+
+void recordSolution(const SimulatorModel& sim, SimulatorData& sd, double scale, int solve_iterations) {
+  const bool exact = sd.work->solver->exactLaw();
+  Eigen::Index row = 0;
+  // Infeasible, or forces so large that not even a loose 1e-6 could be verified: the
+  // step cannot go on. (An unreachable tolerance such as 1e-300 is also "unresolvable",
+  // with a tiny floor: that step is only recorded as unconverged.)
+  // Other formulations are only measured by the exact law: they stop on non-finite impulses.
+  if (sd.out.result.status == SolveStatus::kInfeasible || !sd.out.result.lam.allFinite() ||
+      (exact && sd.out.result.status == SolveStatus::kUnresolvable && sd.out.result.precision_floor > kDivergedFloor))
+    throw std::runtime_error(unsolvableMessage(sim, sd));
+  // A joint's box row that slips (friction sliding, an actuator saturated) holds its bound exactly, as
+  // the law says (eq. 65: u != 0 only at a bound); the solver leaves it within its tolerance of it (a
+  // saturated actuator read 2.69999888 of 2.7 N m). Its impulse is set on the bound: a projection onto
+  // C that moves lambda by less than the tolerance and makes the recorded torque the limit itself.
+  if (!sd.out.joint_rows.empty() && sd.work->problem && !sd.work->locked.pending_full &&
+      sd.out.result.states.size() == sd.work->problem->numBlocks()) {
+    const std::size_t first_block = sd.out.active.size() + sim.anchors.size();
+    const auto& cons = sd.work->problem->constraints();
+    const auto& offsets = sd.work->problem->offsets();
+    for (std::size_t blk = first_block; blk < cons.size(); ++blk) {
+      if (cons[blk].kind != ConstraintKind::kBox || sd.out.result.states[blk] != ContactState::kSlip) continue;
+      const Eigen::Index r = offsets[blk];
+      sd.out.result.lam[r] = sd.out.result.u[r] < 0.0 ? cons[blk].upper : cons[blk].lower;
+    }
+  }
+  // Per-candidate forces (lambda / scale) and states.
+  sd.out.lambda = sd.out.result.lam / scale;
+  for (int i = 0; i < sim.numCandidates(); ++i) {
+    sd.out.candidate_lambda.col(i).setZero();
+    sd.out.candidate_spring.col(i).setZero();
+    sd.out.have_candidate_lambda[i] = false;
+    sd.out.candidate_states[i] = ContactState::kOpen;
+  }
+  row = 0;
+  for (std::size_t blk = 0; blk < sd.out.active.size(); ++blk) {
+    const int i = sd.out.active[blk];
+    const int k = sd.out.candidate_rows[i];
+    if (!exact && k > 1) sd.out.candidate_spring.col(i) = toSlots(sd.work->spring_rows.data() + row, k);
+    sd.out.candidate_lambda.col(i) = toSlots(sd.out.lambda.data() + row, k);
+    sd.out.have_candidate_lambda[i] = true;
+    sd.out.candidate_states[i] = sd.out.result.states[blk];
+    row += k;
+  }
+  for (std::size_t a = 0; a < sim.anchors.size(); ++a, row += 3)
+    sd.out.anchor_lambda.col(a) = sd.out.lambda.segment<3>(row);
+  ++sd.out.solves;
+  sd.out.max_residual_step = std::max(sd.out.max_residual_step, sd.out.result.residual);
+  sd.out.all_converged_step = sd.out.all_converged_step && sd.out.result.own_converged;
+  sd.out.iterations_step += solve_iterations;
+  // The friction rows that are their coordinate's only row all holding: the next step tries those
+  // joints locked first (locked_joints.cpp)
+  const std::size_t first_joint_block = sd.out.active.size() + sim.anchors.size();
+  bool held = exact && sd.out.result.states.size() == first_joint_block + sd.out.joint_rows.size();
+  std::vector<int>& rows_on = sd.work->locked.rows_on;
+  rows_on.assign(static_cast<std::size_t>(sim.model.nv), 0);
+  for (const JointRow& r : sd.out.joint_rows) ++rows_on[static_cast<std::size_t>(r.dof)];
+  bool any_lockable = false;
+  for (std::size_t k = 0; held && k < sd.out.joint_rows.size(); ++k) {
+    const JointRow& r = sd.out.joint_rows[k];
+    if (r.kind != JointRowKind::kFriction || rows_on[static_cast<std::size_t>(r.dof)] != 1) continue;
+    any_lockable = true;
+    held = sd.out.result.states[first_joint_block + k] == ContactState::kStick;
+  }
+  held = held && any_lockable;
+  sd.work->locked.held = held;
+}
+
+void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
+  const Eigen::Index rows = sd.out.rows;
+  setStepProblem(sim, sd, scale);
+  SolverSettings settings = sim.settings.solver_settings;
+  // (the exact-law measures of a step's answer when its result is read: get_result, Python)
+  settings.measure_exact_law = false;
+  const bool exact = sd.work->solver->exactLaw();
+  bool any = stepGuess(sim, sd, scale, exact);
+  Eigen::Index row = 0;
   settings.warm_start = sim.settings.warm_start && any ? WarmStart::kGiven : WarmStart::kNone;
   if (!exact) {  // what the other formulations may know of the step (formulation.hpp)
     StepContext context;
@@ -217,51 +295,7 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
       }
     }
   }
-  // Infeasible, or forces so large that not even a loose 1e-6 could be verified: the
-  // step cannot go on. (An unreachable tolerance such as 1e-300 is also "unresolvable",
-  // with a tiny floor: that step is only recorded as unconverged.)
-  // Other formulations are only measured by the exact law: they stop on non-finite impulses.
-  if (sd.out.result.status == SolveStatus::kInfeasible || !sd.out.result.lam.allFinite() ||
-      (exact && sd.out.result.status == SolveStatus::kUnresolvable && sd.out.result.precision_floor > kDivergedFloor))
-    throw std::runtime_error(unsolvableMessage(sim, sd));
-  // A joint's box row that slips (friction sliding, an actuator saturated) holds its bound exactly, as
-  // the law says (eq. 65: u != 0 only at a bound); the solver leaves it within its tolerance of it (a
-  // saturated actuator read 2.69999888 of 2.7 N m). Its impulse is set on the bound: a projection onto
-  // C that moves lambda by less than the tolerance and makes the recorded torque the limit itself.
-  if (!sd.out.joint_rows.empty() && sd.out.result.states.size() == sd.work->problem->numBlocks()) {
-    const std::size_t first_block = sd.out.active.size() + sim.anchors.size();
-    const auto& cons = sd.work->problem->constraints();
-    const auto& offsets = sd.work->problem->offsets();
-    for (std::size_t blk = first_block; blk < cons.size(); ++blk) {
-      if (cons[blk].kind != ConstraintKind::kBox || sd.out.result.states[blk] != ContactState::kSlip) continue;
-      const Eigen::Index r = offsets[blk];
-      sd.out.result.lam[r] = sd.out.result.u[r] < 0.0 ? cons[blk].upper : cons[blk].lower;
-    }
-  }
-  // Per-candidate forces (lambda / scale) and states.
-  sd.out.lambda = sd.out.result.lam / scale;
-  for (int i = 0; i < sim.numCandidates(); ++i) {
-    sd.out.candidate_lambda.col(i).setZero();
-    sd.out.candidate_spring.col(i).setZero();
-    sd.out.have_candidate_lambda[i] = false;
-    sd.out.candidate_states[i] = ContactState::kOpen;
-  }
-  row = 0;
-  for (std::size_t blk = 0; blk < sd.out.active.size(); ++blk) {
-    const int i = sd.out.active[blk];
-    const int k = sd.out.candidate_rows[i];
-    if (!exact && k > 1) sd.out.candidate_spring.col(i) = toSlots(sd.work->spring_rows.data() + row, k);
-    sd.out.candidate_lambda.col(i) = toSlots(sd.out.lambda.data() + row, k);
-    sd.out.have_candidate_lambda[i] = true;
-    sd.out.candidate_states[i] = sd.out.result.states[blk];
-    row += k;
-  }
-  for (std::size_t a = 0; a < sim.anchors.size(); ++a, row += 3)
-    sd.out.anchor_lambda.col(a) = sd.out.lambda.segment<3>(row);
-  ++sd.out.solves;
-  sd.out.max_residual_step = std::max(sd.out.max_residual_step, sd.out.result.residual);
-  sd.out.all_converged_step = sd.out.all_converged_step && sd.out.result.own_converged;
-  sd.out.iterations_step += solve_iterations;
+  recordSolution(sim, sd, scale, solve_iterations);
 }
 
 }  // namespace stages

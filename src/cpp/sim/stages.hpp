@@ -128,6 +128,22 @@ void projectRedundantSets(const SimulatorModel& sim, SimulatorData& sd);
 /// forces and states. Throws when the problem has no (resolvable) solution.
 void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale);
 
+/// Stage 5's parts (solveContacts runs them in order): the problem handed to the formulation
+/// (sd.work->problem: A, scale b, the blocks' constraints), the warm start sd.work->guess (true when
+/// any entry is nonzero), and after the solve the per-candidate forces, states and statistics.
+void setStepProblem(const SimulatorModel& sim, SimulatorData& sd, double scale);
+bool stepGuess(const SimulatorModel& sim, SimulatorData& sd, double scale, bool exact);
+void recordSolution(const SimulatorModel& sim, SimulatorData& sd, double scale, int solve_iterations);
+
+/// 4b + 5 in time stepping while the joints' dry friction holds (locked_joints.cpp): every joint row a
+/// friction row and the last step's all sticking, the contacts' problem with those coordinates locked
+/// (a Schur complement of eq. 65's all-friction-stick equations, the free coordinates' M_FF only),
+/// solved; its answer with the friction impulses it implies is the full problem's when each lies within
+/// its bound (u = 0 on every friction row). True when that held (sd.out.result and the candidates set,
+/// the full A left to completeLockedStep); false: nothing the full path needs was changed.
+class Stopwatch;
+bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, Stopwatch& watch);
+
 /// 6. Time stepping (eq. 70): v+ = v + h v_free + M^-1 J^T P (P = h lambda, free flyers'
 /// frame turn), row_velocity = J v+, q+ = integrate(q, h v+); t += h.
 void integrateTimeStep(const SimulatorModel& sim, SimulatorData& sd, double h);

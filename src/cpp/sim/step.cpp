@@ -238,12 +238,15 @@ void step(const SimulatorModel& sim, SimulatorData& sd) {
         contactJacobians(sim, sd, sd.v);                // J, drift J' v, Psi
         watch.lap(sd.out.timings.kinematics);
         freeDynamics(sim, sd, sd.v, pd_step);                              // M = U D U^T, M^-1 (tau - nle)
-        delassusOperator(sim, sd);                                         // A = J M^-1 J^T
         rightHandSide(sim, sd, sd.v, h, 0.5, /*tangential_drift=*/false);  // b (eq. 27)
-        if (pd_step > 0.0) addActuatorCompliance(sd, h);                   // effort rows
-        watch.lap(sd.out.timings.delassus);
-        solveContacts(sim, sd, h);  // A P - h b in -N(P), by the formulation
-        watch.lap(sd.out.timings.solve);
+        // the joints' dry friction held at the last step: the contacts with those joints locked first
+        if (!solveJointsLocked(sim, sd, h, watch)) {
+          delassusOperator(sim, sd);                        // A = J M^-1 J^T
+          if (pd_step > 0.0) addActuatorCompliance(sd, h);  // effort rows
+          watch.lap(sd.out.timings.delassus);
+          solveContacts(sim, sd, h);  // A P - h b in -N(P), by the formulation
+          watch.lap(sd.out.timings.solve);
+        }
         integrateTimeStep(sim, sd, h);  // v+, then q+
         watch.lap(sd.out.timings.integrate);
         if (finishJointRows(sim, sd, sd.work->step_v0, h, pd_step) || !repeatable) break;

@@ -84,6 +84,36 @@ struct SystemWork {
   bool free_body_scaling_diagonal = false;  ///< S is diagonal (a box: centre of mass at its origin)
 };
 
+/// A time step solved with the joints' dry friction holding (locked_joints.cpp): the contacts' problem
+/// with every friction-row coordinate locked, its operator, solver and scratch, and the prediction.
+struct LockedJoints {
+  bool held = false;     ///< the last step's joint rows were friction rows only, all sticking
+  int skip = 0;          ///< steps left before the next try, after a try whose joints did not hold
+  int backoff = 0;       ///< the last skip (doubled at each miss, up to kLockedMaxBackoff)
+  bool pending_full = false;          ///< this step's full A and problem not built yet (completeLockedStep)
+  const SimulatorModel* sim = nullptr;  ///< the model of that step (for completeLockedStep)
+  double scale = 0.0;                 ///< that step's h
+  std::vector<char> locked;           ///< per coordinate: locked (its only joint row is its dry friction)
+  std::vector<int> free;              ///< the coordinates not locked
+  std::vector<int> rows_on;           ///< per coordinate: its joint rows (scratch)
+  std::vector<int> kept;              ///< the full problem's rows in the reduced one: contacts, unlocked joints'
+  std::vector<int> sticking_rows;     ///< rebalance's: the sticking contacts' rows (scratch)
+  std::vector<int> locked_rows, locked_dofs;  ///< the locked joint rows (index among the joint rows), their coordinates
+  std::vector<JointRow> joint_rows;   ///< the joint rows `problem` was built for
+  std::vector<JointRow> classified;   ///< the joint rows locked, kept and free were sorted for
+  Eigen::Index contact_rows = -1;     ///< with this many contact rows before them
+  Eigen::MatrixXd mff, z, a;          ///< M_FF = L L^T (L), J_CF L^-T, the reduced A = Z^T Z
+  Eigen::VectorXd xl, y, xf, b, guess, pj;
+  Eigen::VectorXd x;   ///< M^-1 J^T P of the step it solved (integrateTimeStep reads it)
+  Eigen::VectorXd mx, jx, pfull;  ///< M x, J x, P on the full problem's rows (scratch)
+  Eigen::MatrixXd msym;  ///< M, both triangles
+  std::shared_ptr<DenseDelassus> delassus;
+  std::unique_ptr<ContactProblem> problem;
+  std::vector<int> active;            ///< the contacts `problem` was built for
+  std::unique_ptr<ContactSolver> solver;  ///< its own: the sticking step's held factor stays the full problem's
+  SolverResult result;
+};
+
 struct SimulatorWorkspace {
   explicit SimulatorWorkspace(const SimulatorModel& sim);
 
@@ -168,6 +198,8 @@ struct SimulatorWorkspace {
 
   Eigen::VectorXd row_scratch;  ///< one value per row
   Eigen::VectorXd nv_scratch;   ///< one value per velocity coordinate
+
+  LockedJoints locked;  ///< the joints' dry friction holding: the reduced problem (locked_joints.cpp)
 };
 
 }  // namespace stiction

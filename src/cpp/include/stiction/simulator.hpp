@@ -405,6 +405,11 @@ Eigen::MatrixXd jointPlacements(const SimulatorModel& sim, const Eigen::MatrixXd
 /// The Delassus operator A of the last problem as a dense matrix.
 Eigen::MatrixXd denseDelassus(const SimulatorData& sd);
 
+/// A step solved with its joints locked (their dry friction holding: docs/joint-rows.md) leaves its
+/// full A and problem unbuilt; this builds them (sd.out.A, the problem of get_result's measures) from
+/// that step's J and M. Nothing to do otherwise. denseDelassus calls it.
+void completeLockedStep(const SimulatorData& sd);
+
 /// Advance sim_data by one step (time stepping: exactly dt; ODE modes: one
 /// RK4 step of dt, or one accepted adaptive step of at most dt).
 /// Throws std::runtime_error naming t and the culprit when the state becomes
