@@ -48,7 +48,11 @@ def test_time_limit_is_kept(formulation, solver):
         assert not r.converged and not r.own_converged, r.message
     if not r.converged:  # (an exact solver may meet 1e-14 here within the limit: Newton sometimes does)
         # it stopped on the limit and says so, or (Newton's stall) for another reason it names, earlier
-        assert "time limit" in r.message or r.seconds < 0.05, (r.message, stages)
+        # -- or in the iteration that crossed the limit (Newton stalls after ~25 iterations, ~45 ms here:
+        # on a loaded machine its last iteration can end past 50 ms; the limit is checked between them)
+        last = r.stages[-1]
+        one_iteration = last.seconds / max(1, last.iterations)
+        assert "time limit" in r.message or r.seconds < 0.05 + 2 * one_iteration, (r.message, stages)
 
 
 @pytest.mark.parametrize("key", ["pyramid_facets"])
