@@ -260,12 +260,7 @@ bool solveJointsLocked(const SimulatorModel& sim, SimulatorData& sd, double h, S
   // The reduced problem: its operator updated in place while the contacts and joint rows are the same
   if (!lk.problem || lk.active != sd.out.active || lk.joint_rows != joint_rows) {
     std::vector<Constraint> cons;
-    for (int i : sd.out.active)
-      switch (sd.out.candidate_rows[i]) {
-        case 1: cons.push_back(Constraint::unilateral()); break;
-        case 2: cons.push_back(Constraint::planarFriction(candidateMu(sim, i))); break;
-        default: cons.push_back(Constraint::spatialFriction(candidateMu(sim, i)));
-      }
+    appendContactConstraints(sim, sd, cons);
     for (Eigen::Index r = mc; r < mr; ++r)
       cons.push_back(jointRowConstraint(sim, sd, static_cast<std::size_t>(lk.kept[static_cast<std::size_t>(r)] - mc), h));
     lk.delassus = std::make_shared<DenseDelassus>(lk.a);

@@ -80,12 +80,7 @@ void setStepProblem(const SimulatorModel& sim, SimulatorData& sd, double scale) 
                              std::to_string(sd.t));
   const auto constraints = [&] {
     std::vector<Constraint> cons;
-    for (int i : sd.out.active)
-      switch (sd.out.candidate_rows[i]) {
-        case 1: cons.push_back(Constraint::unilateral()); break;
-        case 2: cons.push_back(Constraint::planarFriction(candidateMu(sim, i))); break;
-        default: cons.push_back(Constraint::spatialFriction(candidateMu(sim, i)));
-      }
+    appendContactConstraints(sim, sd, cons);
     for (std::size_t a = 0; a < sim.anchors.size(); ++a) cons.push_back(Constraint::bilateral(3));
     for (std::size_t k = 0; k < sd.out.joint_rows.size(); ++k) cons.push_back(jointRowConstraint(sim, sd, k, scale));
     return cons;

@@ -259,6 +259,17 @@ inline double candidateMu(const SimulatorModel& sim, int i) {
   return sim.slot_pair[i] < 0 ? sim.contacts[i].mu : sim.pairs[sim.slot_pair[i]].mu;
 }
 
+/// The active contacts' constraints, in the problem's order: 1 row unilateral, 2 planar friction,
+/// 3 spatial friction (the full problem and the locked-joints one start alike).
+inline void appendContactConstraints(const SimulatorModel& sim, const SimulatorData& sd, std::vector<Constraint>& cons) {
+  for (int i : sd.out.active)
+    switch (sd.out.candidate_rows[i]) {
+      case 1: cons.push_back(Constraint::unilateral()); break;
+      case 2: cons.push_back(Constraint::planarFriction(candidateMu(sim, i))); break;
+      default: cons.push_back(Constraint::spatialFriction(candidateMu(sim, i)));
+    }
+}
+
 /// The 3-slot (t1, t2, n) layout from k = 1, 2 or 3 rows.
 inline Eigen::Vector3d toSlots(const double* x, int k) {
   if (k == 3) return Eigen::Vector3d(x[0], x[1], x[2]);
