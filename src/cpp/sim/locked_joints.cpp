@@ -142,13 +142,17 @@ bool rebalance(const SimulatorModel& sim, SimulatorData& sd, LockedJoints& lk, d
   SolverResult& rr = lk.result;
   const Eigen::MatrixXd& J = sd.work->parts[0].J;
   std::vector<int>& S = lk.sticking_rows;
+  std::vector<Eigen::Index>& offsets = lk.sticking_offsets;  // each sticking contact's first row
   S.clear();
-  std::vector<std::size_t> blocks;
+  offsets.clear();
+  std::vector<std::size_t>& blocks = lk.sticking_blocks;
+  blocks.clear();
   Eigen::Index row = 0;
   for (std::size_t blk = 0; blk < sd.out.active.size(); ++blk) {
     const int k = sd.out.candidate_rows[sd.out.active[blk]];
     if (k == 3 && rr.states[blk] == ContactState::kStick) {
       blocks.push_back(blk);
+      offsets.push_back(row);
       for (int q = 0; q < k; ++q) S.push_back(static_cast<int>(row + q));
     }
     row += k;
@@ -156,26 +160,31 @@ bool rebalance(const SimulatorModel& sim, SimulatorData& sd, LockedJoints& lk, d
   const auto ms = static_cast<Eigen::Index>(S.size()), nf = static_cast<Eigen::Index>(lk.free.size()),
              nl = static_cast<Eigen::Index>(lk.locked_dofs.size());
   if (ms <= nf) return false;
-  Eigen::MatrixXd N(ms, nf), G(nl, ms);
+  Eigen::MatrixXd &N = lk.rb_n, &G = lk.rb_g;
+  N.resize(ms, nf);
+  G.resize(nl, ms);
   for (Eigen::Index s = 0; s < ms; ++s) {
     for (Eigen::Index a = 0; a < nf; ++a) N(s, a) = J(S[s], lk.free[a]);
     for (Eigen::Index i = 0; i < nl; ++i) G(i, s) = J(S[s], lk.locked_dofs[i]);
   }
-  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(N);
-  const Eigen::MatrixXd Q = qr.householderQ();
-  const Eigen::MatrixXd B = Q.rightCols(ms - nf);  // orthogonal to J_SF's columns
-  const Eigen::MatrixXd GB = G * B;
-  Eigen::MatrixXd H = GB.transpose() * GB;
-  H.diagonal().array() += 1e-10 * (H.trace() / double(H.rows()) + 1e-300);
-  const Eigen::VectorXd xi = H.ldlt().solve(GB.transpose() * lk.pj);
-  const Eigen::VectorXd d = B * xi;
+  lk.rb_qr.compute(N);
+  lk.rb_q = lk.rb_qr.householderQ();
+  const auto B = lk.rb_q.rightCols(ms - nf);  // orthogonal to J_SF's columns
+  lk.rb_gb.noalias() = G * B;
+  lk.rb_h.noalias() = lk.rb_gb.transpose() * lk.rb_gb;
+  lk.rb_h.diagonal().array() += 1e-10 * (lk.rb_h.trace() / double(lk.rb_h.rows()) + 1e-300);
+  lk.rb_xi.noalias() = lk.rb_gb.transpose() * lk.pj;
+  lk.rb_ldlt.compute(lk.rb_h);
+  lk.rb_ldlt.solveInPlace(lk.rb_xi);
+  lk.rb_d.noalias() = B * lk.rb_xi;
+  const Eigen::VectorXd& d = lk.rb_d;
   if (!d.allFinite()) return false;
-  Eigen::VectorXd lam = rr.lam;
+  Eigen::VectorXd& lam = lk.rb_lam;
+  lam = rr.lam;
   for (Eigen::Index s = 0; s < ms; ++s) lam[S[s]] += d[s];
-  for (std::size_t blk : blocks) {  // strictly inside the cone still
-    Eigen::Index o = 0;
-    for (std::size_t b = 0; b < blk; ++b) o += sd.out.candidate_rows[sd.out.active[b]];
-    const double mu = candidateMu(sim, sd.out.active[blk]);
+  for (std::size_t c = 0; c < blocks.size(); ++c) {  // strictly inside the cone still
+    const Eigen::Index o = offsets[c];
+    const double mu = candidateMu(sim, sd.out.active[blocks[c]]);
     if (!(lam[o + 2] > 0.0 && std::hypot(lam[o], lam[o + 1]) < (1.0 - kInsideBound) * mu * lam[o + 2])) return false;
   }
   // the reduced problem's natural map at the new forces

@@ -8,6 +8,8 @@
 #include <memory>
 #include <vector>
 
+#include <Eigen/Cholesky>
+#include <Eigen/QR>
 #include <Eigen/SparseCore>
 #include <pinocchio/multibody/data.hpp>
 #include <pinocchio/multibody/geometry.hpp>
@@ -98,6 +100,13 @@ struct LockedJoints {
   std::vector<int> rows_on;           ///< per coordinate: its joint rows (scratch)
   std::vector<int> kept;              ///< the full problem's rows in the reduced one: contacts, unlocked joints'
   std::vector<int> sticking_rows;     ///< rebalance's: the sticking contacts' rows (scratch)
+  std::vector<Eigen::Index> sticking_offsets;  ///< rebalance's: those contacts' first rows (scratch)
+  std::vector<std::size_t> sticking_blocks;     ///< rebalance's: those contacts' blocks (scratch)
+  // rebalance's matrices, kept so that a step that rebalances allocates only when the sizes change
+  Eigen::MatrixXd rb_n, rb_g, rb_q, rb_gb, rb_h;
+  Eigen::HouseholderQR<Eigen::MatrixXd> rb_qr;
+  Eigen::LDLT<Eigen::MatrixXd> rb_ldlt;
+  Eigen::VectorXd rb_xi, rb_d, rb_lam;
   std::vector<int> locked_rows, locked_dofs;  ///< the locked joint rows (index among the joint rows), their coordinates
   std::vector<JointRow> joint_rows;   ///< the joint rows `problem` was built for
   std::vector<JointRow> classified;   ///< the joint rows locked, kept and free were sorted for
