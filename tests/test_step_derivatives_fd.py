@@ -12,6 +12,7 @@ six scenes (skipped while the simulator has no step_derivatives). STICTION_DERIV
 many states per scene (default 10; the issue's check: 100).
 """
 import os
+import zlib
 
 import numpy as np
 import pinocchio as pin
@@ -216,66 +217,128 @@ def test_reference_rejects_bad_input():
 
 
 def _cube_slide_state(sim, rng):
+    """Sliding on its face in a random direction and heading, without spin: a spinning cube's corners
+    slide in different directions and the split of its weight over the 4 corners (statically
+    indeterminate) then changes the friction torque, so v⁺ itself is not unique."""
     angle = rng.uniform(0, 2 * np.pi)
     speed = rng.uniform(0.6, 1.5)
     free_body_state(sim, np.array([0.0, 0.0, 0.05]), pin.exp3(np.array([0, 0, rng.uniform(-np.pi, np.pi)])),
-                    np.array([speed * np.cos(angle), speed * np.sin(angle), 0, 0, 0, rng.uniform(-1, 1)]))
-    sim.rollout(rng.integers(1, 40) * sim.dt)
+                    np.array([speed * np.cos(angle), speed * np.sin(angle), 0, 0, 0, 0]))
+    sim.rollout(int(rng.integers(1, 40)) * sim.dt)
 
 
-def _settle_then(steps):
+def _settle_then(steps, force=0.05):
     def prepare(sim, rng):
         sim.rollout(int(rng.integers(1, steps)) * sim.dt)
-        if sim.data.tau_ff.size:  # a small random generalized force, below the cones
-            sim.data.tau_ff[:] = sim.data.tau_ff + rng.normal(scale=0.05, size=sim.data.tau_ff.size)
+        # a small random generalized force, below the cones
+        sim.data.tau_ff[:] = sim.data.tau_ff + rng.normal(scale=force, size=sim.data.tau_ff.size)
     return prepare
 
 
+def _pinch_slipping(sim, rng):
+    """The pinch with its fingers opened by a feed-forward of 12-18 N against their 20 N squeeze: the
+    pads' friction 2 μ F < m g and the cube slides down between them. (Held, the cube's weight splits
+    over the 4 pads in a way the solver picks: two of them stick on their cone's edge, a mode boundary
+    under any perturbation; those states are reported with the boundary ones.)"""
+    sim.rollout(int(rng.integers(1, 100)) * sim.dt)
+    opening = rng.uniform(12.0, 18.0)
+    sim.data.tau_ff[:2] = [-opening, opening]
+    sim.rollout(int(rng.integers(2, 30)) * sim.dt)
+
+
+# scene -> (bundled scene, how to draw a state, eps of the reference)
 SCENES = {
-    "cube-slide": ("cube-slide", _cube_slide_state),
-    "cube-incline-stick": ("cube-incline-stick", _settle_then(200)),
-    "two-cube-stack": ("two-cube-stack", _settle_then(200)),
-    "solo12-stand": ("solo12-stand", _settle_then(300)),
-    "solo12-slope-slip": ("solo12-slope-slip", _settle_then(300)),
-    "pinch": ("pinch", _settle_then(300)),
+    "cube-slide": ("cube-slide", _cube_slide_state, 1e-6),
+    # 4 % from sliding: a lift of 1e-6 m takes 12 % of its normal impulse (gap / h) and it slides
+    "cube-incline-stick": ("cube-incline-stick", _settle_then(200, force=0.0), 1e-7),
+    "two-cube-stack": ("two-cube-stack", _settle_then(200), 1e-6),
+    "solo12-stand": ("solo12-stand", _settle_then(300), 1e-6),
+    "solo12-slope-slip": ("solo12-slope-slip", _settle_then(300), 1e-6),
+    "pinch": ("pinch", _pinch_slipping, 1e-6),
 }
 
 
-def relative_errors(analytic: StepDerivatives, reference: StepDerivatives) -> dict[str, float]:
-    """Per block: max |analytic - reference| / max |reference| (NaN columns of the reference skipped;
-    an all-zero reference block: the absolute error)."""
+def natural_scales(sim) -> dict[str, float]:
+    """Each block's natural size, below which its reference is compared in absolute terms: v⁺ per unit
+    q or v 1, per unit τ h max (M⁻¹)_kk, per unit μ |g| h; q⁺ the same times h (dq⁺/dq: 1)."""
+    model = sim.scene.model
+    h = sim.dt
+    minv = float(np.diag(pin.computeMinverse(model, model.createData(), sim.data.q)).max())
+    g = float(np.linalg.norm(model.gravity.linear))
+    return {"dq_dq": 1.0, "dv_dq": 1.0, "dq_dv": h, "dv_dv": 1.0, "dq_dtau": h * h * minv, "dv_dtau": h * minv,
+            "dq_dmu": g * h * h, "dv_dmu": g * h}
+
+
+def relative_errors(analytic: StepDerivatives, reference: StepDerivatives, scales=None) -> dict[str, float]:
+    """Per block: max |analytic - reference| / max(max |reference|, its natural scale) (NaN columns of the
+    reference skipped). Without scales: / max |reference| (an all-zero block: the absolute error)."""
     out = {}
     for name in BLOCKS:
         a, f = np.asarray(getattr(analytic, name)), np.asarray(getattr(reference, name))
         if f.size == 0:
             continue
         keep = np.isfinite(f)
-        scale = np.abs(f[keep]).max() if keep.any() else 0.0
+        if not keep.any():
+            continue
+        scale = max(np.abs(f[keep]).max(), 0.0 if scales is None else scales[name])
         out[name] = float(np.abs(a[keep] - f[keep]).max() / scale) if scale > 0 else float(np.abs(a[keep]).max())
     return out
+
+
+SMOOTH = 1e-5  # the reference at eps and eps / 3 within this (relative_errors): the step is smooth there
+
+
+def draw_states(label, count):
+    """`count` states of scene `label`, each with its reference: (sim, reference, kind), kind "stable"
+    (the modes the same under every ±ε perturbation, no boundary flag, and the reference at ε and ε/3
+    within SMOOTH), "boundary" (a mode changed or a flag is set) or "unresolved" (modes stable but the
+    two references differ: the step is not smooth at that scale, e.g. a body on 4 coplanar contacts
+    whose weight split is statically indeterminate and slip directions differ)."""
+    scene, prepare, eps = SCENES[label]
+    rng = np.random.default_rng(zlib.crc32(label.encode()))
+    for _ in range(count):
+        sim = Simulator(scene)
+        prepare(sim, rng)
+        reference, report = finite_difference_step_derivatives(sim, eps=eps, details=True)
+        noise = {}
+        if not report.mode_stable or reference.boundary.any():
+            kind = "boundary"
+        else:
+            finer = finite_difference_step_derivatives(sim, eps=eps / 3)
+            noise = relative_errors(finer, reference, natural_scales(sim))
+            kind = "stable" if max(noise.values()) <= SMOOTH else "unresolved"
+        yield sim, reference, kind, noise
+
+
+def distribution(values) -> str:
+    return f"median {np.median(values):.2e}, max {np.max(values):.2e}" if len(values) else "none"
 
 
 @pytest.mark.parametrize("label", list(SCENES))
 def test_analytic_derivatives_match_the_reference(label, capsys):
     if not hasattr(Simulator, "step_derivatives"):
         pytest.skip("Simulator.step_derivatives is not built yet (issue 26, the analytic half)")
-    scene, prepare = SCENES[label]
-    rng = np.random.default_rng(abs(hash(label)) % 2**32)
-    stable, boundary = [], []
-    for _ in range(STATES):
-        sim = Simulator(scene)
-        prepare(sim, rng)
-        reference, report = finite_difference_step_derivatives(sim, details=True)
-        q, v = sim.data.q.copy(), sim.data.v.copy()
+    """At mode-stable states, every block within AGREEMENT (relative) of the reference, or within 3 times
+    the reference's own noise where that is larger (its ε and ε/3 answers differ by up to ~5e-6 on the μ
+    columns of a body on 4 coplanar corners, measured: the solver's split of the indeterminate forces)."""
+    if not hasattr(Simulator, "step_derivatives"):
+        pytest.skip("Simulator.step_derivatives is not built yet (issue 26, the analytic half)")
+    errors = {"stable": [], "boundary": [], "unresolved": []}
+    reference_noise, excess = [], []
+    for sim, reference, kind, noise in draw_states(label, STATES):
+        q, v, t = sim.data.q.copy(), sim.data.v.copy(), sim.data.t
         analytic = sim.step_derivatives()
-        assert np.array_equal(sim.data.q, q) and np.array_equal(sim.data.v, v)  # does not advance the state
-        worst = max(relative_errors(analytic, reference).values())
-        (stable if report.mode_stable and not reference.boundary.any() else boundary).append(worst)
+        assert isinstance(analytic, StepDerivatives)
+        assert np.array_equal(sim.data.q, q) and np.array_equal(sim.data.v, v) and sim.data.t == t  # no step
+        error = relative_errors(analytic, reference, natural_scales(sim))
+        errors[kind].append(max(error.values()))
+        if kind == "stable":
+            reference_noise.append(max(noise.values()))
+            excess += [f"{name} {e:.1e} (reference noise {noise[name]:.1e})" for name, e in error.items()
+                       if e > max(AGREEMENT, 3 * noise[name])]
     with capsys.disabled():
-        line = f"\n[{label}] {len(stable)} mode-stable states: relative error median {np.median(stable):.2e}, " \
-               f"max {np.max(stable):.2e}" if stable else f"\n[{label}] no mode-stable state"
-        if boundary:
-            line += f"; {len(boundary)} on a mode boundary: median {np.median(boundary):.2e}, max {np.max(boundary):.2e}"
-        print(line)
-    assert stable, "no mode-stable state drawn"
-    assert max(stable) <= AGREEMENT
+        print(f"\n[{label}] relative error of step_derivatives against the reference: "
+              + "; ".join(f"{len(x)} {kind} states: {distribution(x)}" for kind, x in errors.items())
+              + f"; the reference's own noise (eps vs eps/3) at the stable states: {distribution(reference_noise)}")
+    assert errors["stable"], "no mode-stable state drawn"
+    assert not excess, excess
