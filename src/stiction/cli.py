@@ -442,7 +442,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("casestudy", help="run one of the paper's case studies and check its numbers")
     p.add_argument("name", help="planar-friction, restitution, painleve, pendulum, kinematic-levels, "
-                   "diagonal-push, slide-lift")
+                   "diagonal-push, slide-lift, identify-friction")
     p.add_argument("--plot", metavar="FILE.png", help="draw the case study's figure")
     p.add_argument("--json", action="store_true", help="print name, equations, checks and points as JSON")
     p.add_argument("--quick", action="store_true", help="a smaller sweep (same checks)")

@@ -30,6 +30,7 @@ _MODULES = {
     "kinematic-levels": "kinematic_levels",
     "diagonal-push": "diagonal_push",
     "slide-lift": "slide_lift",
+    "identify-friction": "identify_friction",
 }
 
 
