@@ -87,6 +87,15 @@ def test_trot(tmp_path):
     assert row("mu 0.8", "mujoco")[0] > 0.0  # the same controller moves the twin forward too
 
 
+def test_identify_friction(tmp_path):
+    """The cube's mu and mass recovered from the noisy recording to 1e-3 (relative) in <= 50 iterations."""
+    out = run(Path(EXAMPLES[0].parent / "identify_friction.py"), tmp_path, "--quick")
+    mu = next(line for line in out.splitlines() if line.startswith("cube: mu"))
+    mass = next(line for line in out.splitlines() if line.startswith("cube: mass"))
+    assert abs(numbers(mu)[0] - 0.5) / 0.5 <= 1e-3 and abs(numbers(mass)[0] - 1.0) <= 1e-3
+    assert int(next(line for line in out.splitlines() if "iterations" in line).split()[1]) <= 50
+
+
 def test_every_example_has_a_test():
-    tested = {"custom_model.py", "solve_contact_problem.py", "joint_rows.py", "trot.py"}
+    tested = {"custom_model.py", "solve_contact_problem.py", "joint_rows.py", "trot.py", "identify_friction.py"}
     assert {p.name for p in EXAMPLES} == tested
