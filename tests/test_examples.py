@@ -96,6 +96,25 @@ def test_identify_friction(tmp_path):
     assert int(next(line for line in out.splitlines() if "iterations" in line).split()[1]) <= 50
 
 
+def test_throw_to_target(tmp_path):
+    """Newton through the chained step Jacobians lands the sliding cube on the target (< 1e-6 m) and
+    Nelder-Mead, given the same number of simulated steps, does not; the launch velocity found agrees
+    with the closed form of a slide from rest speed v0: distance v0^2 / (2 mu g) along v0, to the
+    discretisation's O(h) (the exact law's time-stepped stop is within a step of the continuous one)."""
+    out = run(Path(EXAMPLES[0].parent / "throw_to_target.py"), tmp_path, "--quick")
+    gradient = numbers(next(line for line in out.splitlines() if line.startswith("gradient (")))
+    nelder_mead = numbers(next(line for line in out.splitlines() if line.startswith("nelder-mead")))
+    assert gradient[0] < 1e-6 and nelder_mead[0] > 1e-6
+    assert "gradient True, nelder-mead False" in out
+    last = next(line for line in reversed(out.splitlines()) if line.startswith("gradient iteration"))
+    vx, vy = numbers(last)[:2]
+    v0 = (vx * vx + vy * vy) ** 0.5
+    distance = v0 * v0 / (2 * 0.5 * 9.81)  # (the cube starts at x = y = 0)
+    assert distance == pytest.approx((0.25 ** 2 + 0.10 ** 2) ** 0.5, rel=0.02)
+    assert vy / vx == pytest.approx(0.10 / 0.25, rel=1e-6)  # a straight slide: no rotation, friction along -v
+
+
 def test_every_example_has_a_test():
-    tested = {"custom_model.py", "solve_contact_problem.py", "joint_rows.py", "trot.py", "identify_friction.py"}
+    tested = {"custom_model.py", "solve_contact_problem.py", "joint_rows.py", "trot.py", "identify_friction.py",
+              "throw_to_target.py"}
     assert {p.name for p in EXAMPLES} == tested
