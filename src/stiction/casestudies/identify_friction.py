@@ -264,9 +264,12 @@ def run(quick: bool = False, derivatives: str | None = None) -> CaseStudyResult:
 
 def plot(result: CaseStudyResult, path) -> None:
     """The parameters' relative error per Gauss-Newton iteration, one line per experiment and parameter."""
-    from ..plots import pyplot  # noqa: PLC0415
+    from .._optional import require  # noqa: PLC0415
 
-    plt = pyplot()
+    matplotlib = require("matplotlib", "plot", "plots")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
     truth = {e.name: (e.mu, e.mass) for e in experiments()}
     fig, ax = plt.subplots(figsize=(6, 4))
     for name in truth:
