@@ -229,7 +229,7 @@ def finite_difference_step_derivatives(sim, eps: float = 1e-6, scheme: str = "ce
     set), and each candidate contact's μ (its own SphereContact's μ, which the C++ model reads at every
     step; the model is immutable, so a perturbed model is built per contact and sign). The output q⁺ is
     read as ``pinocchio.difference(model, q⁺₀, q⁺)``. ε is `eps` on q and v; on τ_k it is
-    eps / (h (M⁻¹)_kk) and on μ eps / (|g| h), so that every perturbation moves v⁺ by about `eps` (with
+    eps / (h (M⁻¹)_kk) and on μ eps / (‖g‖ h), so that every perturbation moves v⁺ by about `eps` (with
     `eps` on τ, dq⁺/dτ ~ h² M⁻¹ was at the rounding of q⁺). The default 1e-6 stays below the open /
     closed boundary of a body resting on the ground (a lift of g h² ≈ 1e-5 m at h = 1 ms opens it).
 
