@@ -167,6 +167,23 @@ def test_ball_rolling_closed_form():
     np.testing.assert_allclose(d.dv_dmu, 0.0, atol=1e-9)  # rolling: friction inside the cone
 
 
+def test_coal_pair_mu_column_closed_form():
+    """ball-on-table: the ball (r = 5 cm, 0.5 kg, I = 5e-4) sliding at 0.5 m/s on the table top through a
+    coal pair (one μ per pair: its column goes to its slot in the problem). Friction μ m g h opposes the
+    slide at c = (0, 0, -r): dν'_x/dμ = -g h, dω_y/dμ = g h m r / I, and the frame turn exp(hω⁺)ᵀ adds
+    dν_z/dμ = h ν_x dω_y/dμ - g h sin(h ω⁺_y) (the turn of the changed ν' and the changed turn of ν')."""
+    sim = Simulator("ball-on-table")
+    sim.set_state(q=np.array([0.05, 0.0, 0.25, 0.0, 0.0, 0.0, 1.0]), v=np.array([0.5, 0, 0, 0, 0, 0]))
+    d, report = finite_difference_step_derivatives(sim, details=True)
+    assert d.modes == ("none", "slide") and report.mode_stable and not report.mu_notes
+    g, h, m, r, inertia = 9.81, sim.dt, 0.5, 0.05, 5e-4
+    spin = g * h * m * r / inertia
+    nu_x = 0.5 - 0.5 * g * h  # after this step's friction
+    expected = np.array([-g * h, 0.0, h * nu_x * spin - g * h * np.sin(h * 0.5 * spin), 0.0, spin, 0.0])
+    np.testing.assert_allclose(d.dv_dmu[:, 1], expected, rtol=1e-5, atol=1e-9)
+    np.testing.assert_allclose(d.dv_dmu[:, 0], 0.0)  # the ground pair: not in the problem
+
+
 def test_reference_leaves_the_simulator_untouched():
     """Two twins; one gets the reference computed on it: their next steps agree to the last bit
     (state, the warm start's impulses, the outputs)."""

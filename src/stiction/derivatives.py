@@ -124,7 +124,8 @@ class _ReferenceStepper:
         self.sim = sim
         self.scene = sim.scene
         self.settings = _copy_settings(sim.model.settings, tolerance=float(tolerance),
-                                       max_iterations=int(max_iterations), warm_start=False)
+                                       max_iterations=int(max_iterations), warm_start=False,
+                                       time_limit=0.0)
         self.base = self._model(self.scene.contacts, self.scene.pairs)
         d = sim.data
         self.control = {k: np.array(getattr(d, k), dtype=float) for k in ("kp", "kd", "q_target", "v_target", "tau_ff")}
