@@ -38,6 +38,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import pinocchio as pin
@@ -69,7 +70,7 @@ class Experiment:
     mu_start: float
     mass_start: float
     payload: bool          # mass = a payload added to the body (True) or the body's own mass, inertia scaled
-    force: callable        # t -> tau_ff (nv)
+    force: Callable[[float], np.ndarray]  # t -> tau_ff (nv), the known input
     q0: np.ndarray | None = None
     v0: np.ndarray | None = None
 
@@ -216,7 +217,7 @@ def identify(exp: Experiment, q_meas, v_meas, derivatives: str = "fd"):
         t = 1.0
         while True:
             trial = theta + t * delta
-            trial[0] = max(trial[0], 1e-3)
+            trial = np.maximum(trial, 1e-3)  # mu and the mass stay positive (the mass column's differences too)
             r_trial, qs_t, sens_t, model_t = evaluate(trial, derivatives)
             if 0.5 * float(r_trial @ r_trial) <= cost or t < 1e-3:
                 break
