@@ -167,6 +167,50 @@ def test_ball_rolling_closed_form():
     np.testing.assert_allclose(d.dv_dmu, 0.0, atol=1e-9)  # rolling: friction inside the cone
 
 
+def ur5_in_free_motion(rng):
+    """The UR5 (fixed base, no contact) at a random state and force, its joints' own rows off."""
+    sim = Simulator("ur5-joint-limit", joint_limits=False, joint_friction=False, joint_damping=False,
+                    effort_limits=False)
+    sim.set_state(q=sim.data.q + rng.normal(scale=0.3, size=6), v=rng.normal(size=6))
+    sim.data.tau_ff[:] = rng.normal(size=6)
+    return sim
+
+
+def test_articulated_free_motion_against_pinocchio_aba_derivatives():
+    """An arm in free motion, PD off: v⁺ = v + h ABA(q, v, τ), q⁺ = q + h v⁺ (revolute joints), so
+    dv⁺/dq = h ∂a/∂q, dv⁺/dv = I + h ∂a/∂v, dv⁺/dτ = h M⁻¹ from Pinocchio's computeABADerivatives, and
+    dq⁺/dx = h dv⁺/dx (+ I for q). Measured: 1.9e-9 relative (dv⁺/dq), 1e-7 on the q⁺ blocks (q⁺'s rounding)."""
+    sim = ur5_in_free_motion(np.random.default_rng(0))
+    sim.data.kp[:] = 0.0
+    sim.data.kd[:] = 0.0
+    d = finite_difference_step_derivatives(sim)
+    model, h = sim.scene.model, sim.dt
+    data = model.createData()
+    pin.computeABADerivatives(model, data, sim.data.q, sim.data.v, sim.data.tau_ff)
+    minv = np.triu(data.Minv) + np.triu(data.Minv, 1).T
+    expected = {"dv_dq": h * data.ddq_dq, "dv_dv": np.eye(6) + h * data.ddq_dv, "dv_dtau": h * minv}
+    expected.update({"dq_dq": np.eye(6) + h * expected["dv_dq"], "dq_dv": h * expected["dv_dv"],
+                     "dq_dtau": h * expected["dv_dtau"]})
+    for name, value in expected.items():
+        tolerance = 1e-8 if name.startswith("dv") else 1e-6
+        assert np.abs(getattr(d, name) - value).max() <= tolerance * np.abs(value).max(), name
+
+
+def test_force_through_the_implicit_pd():
+    """With the joint PD on (kp 2000, kd 100 on five joints), implicit in the step:
+    (M + h Kd + h² Kp)(v⁺ - v) = h (τ_ff + Kp (q_t - q - h v) + Kd (v_t - v) - nle), so
+    dv⁺/dτ = h (M + h Kd + h² Kp)⁻¹, not h M⁻¹ (measured: 3.3e-10 relative)."""
+    sim = ur5_in_free_motion(np.random.default_rng(1))
+    d = finite_difference_step_derivatives(sim)
+    model, h = sim.scene.model, sim.dt
+    mass = pin.crba(model, model.createData(), sim.data.q)
+    mass = np.triu(mass) + np.triu(mass, 1).T
+    damped = mass + h * np.diag(sim.data.kd) + h * h * np.diag(sim.data.kp)
+    expected = h * np.linalg.inv(damped)
+    assert sim.data.kp.max() == 2000.0
+    np.testing.assert_allclose(d.dv_dtau, expected, atol=1e-8 * np.abs(expected).max())
+
+
 def test_coal_pair_mu_column_closed_form():
     """ball-on-table: the ball (r = 5 cm, 0.5 kg, I = 5e-4) sliding at 0.5 m/s on the table top through a
     coal pair (one μ per pair: its column goes to its slot in the problem). Friction μ m g h opposes the
