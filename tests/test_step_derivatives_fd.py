@@ -2,7 +2,9 @@
 
 First the finite-difference reference itself (stiction.derivatives.finite_difference_step_derivatives)
 against closed forms of the step, so that it can be trusted: a free-falling body, a block sliding on a
-plane, a block sticking on a slope, a ball rolling down a slope. The closed forms are the time-stepping
+plane, a block sticking (pushed on flat ground, resting on a slope), a ball rolling down a slope, a ball
+sliding on a table through a coal pair (its μ column), and an arm in free motion against Pinocchio's
+ABA derivatives (with its implicit PD: dv⁺/dτ = h (M + h K_d + h² K_p)⁻¹). The closed forms are the time-stepping
 step of docs/simulator.md written out by hand for one rigid body (v⁺ = v + h M⁻¹(τ - nle) + M⁻¹Jᵀ P with
 the free flyer's linear velocity held in the step's starting frame, p⁺ = p + h R ν', R⁺ = R exp(h ω⁺),
 ν⁺ = exp(h ω⁺)ᵀ ν'), with Pinocchio's exp3/Jexp3 for the rotation's Jacobians.
