@@ -126,6 +126,8 @@ def simulate(exp: Experiment, mu: float, mass: float, sensitivity: str | None = 
     "fd") its μ sensitivity S (N+1, 2 nv): dx_k/dμ, q in tangent coordinates at q_k."""
     from ..derivatives import _ReferenceStepper  # noqa: PLC0415
 
+    if sensitivity not in (None, *DERIVATIVES):
+        raise ValueError(f"sensitivity must be None or one of {', '.join(DERIVATIVES)}, got {sensitivity!r}")
     sim = _simulator(exp, mu, mass)
     model = sim.scene.model
     nv = model.nv
@@ -133,7 +135,7 @@ def simulate(exp: Experiment, mu: float, mass: float, sensitivity: str | None = 
     qs, vs = [sim.data.q.copy()], [sim.data.v.copy()]
     S = np.zeros(2 * nv)
     sens = [S.copy()]
-    if sensitivity == "fd":
+    if sensitivity == "fd":  # the step at mu +- step_mu: a model each
         step_mu = 1e-6
         plus = _ReferenceStepper(_simulator(exp, mu + step_mu, mass), SOLVER_TOLERANCE, 1000)
         minus = _ReferenceStepper(_simulator(exp, mu - step_mu, mass), SOLVER_TOLERANCE, 1000)
@@ -146,21 +148,13 @@ def simulate(exp: Experiment, mu: float, mass: float, sensitivity: str | None = 
             S = d.state_jacobian() @ S + np.concatenate([d.dq_dmu.sum(axis=1), d.dv_dmu.sum(axis=1)])
         elif sensitivity == "fd":
             # central differences along (S, 1): F S + f_mu, x perturbed by +-step_mu S and mu by +-step_mu
-            # (each stepper's model has mu +- step_mu)
-            outs = []
-            for sign, stepper in ((1.0, plus), (-1.0, minus)):
-                qp, vp, _, _ = stepper.step(pin.integrate(model, q, sign * step_mu * S[:nv]),
-                                            v + sign * step_mu * S[nv:], tau)
-                outs.append((qp, vp))
-            sim.step()
-            q1 = sim.data.q
-            S = np.concatenate([(pin.difference(model, q1, outs[0][0]) - pin.difference(model, q1, outs[1][0])),
-                                outs[0][1] - outs[1][1]]) / (2 * step_mu)
-            qs.append(sim.data.q.copy())
-            vs.append(sim.data.v.copy())
-            sens.append(S.copy())
-            continue
+            outs = [stepper.step(pin.integrate(model, q, sign * step_mu * S[:nv]), v + sign * step_mu * S[nv:], tau)
+                    for sign, stepper in ((1.0, plus), (-1.0, minus))]
         sim.step()
+        if sensitivity == "fd":  # q+ in tangent coordinates at the nominal step's q+
+            q1 = sim.data.q
+            S = np.concatenate([pin.difference(model, q1, outs[0][0]) - pin.difference(model, q1, outs[1][0]),
+                                outs[0][1] - outs[1][1]]) / (2 * step_mu)
         qs.append(sim.data.q.copy())
         vs.append(sim.data.v.copy())
         sens.append(S.copy())
