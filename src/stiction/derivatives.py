@@ -357,8 +357,8 @@ def finite_difference_step_jvp(sim, dq, dv, dtau=None, eps: float = 1e-6, *,
                                tolerance: float = FD_TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
     """The step's Jacobian applied to one direction, by central differences: (dq⁺, dv⁺) =
     (∂q⁺/∂q dq + ∂q⁺/∂v dv + ∂q⁺/∂τ dτ, the same for v⁺), q in tangent coordinates as in
-    :class:`StepDerivatives`. Two steps instead of the 2 (3 nv + nc) of
-    :func:`finite_difference_step_derivatives` (the same steps: the simulator's settings with the
+    :class:`StepDerivatives`. Three steps (±, and the nominal one as q⁺'s origin) instead of the
+    2 (3 nv + nc) + 1 of :func:`finite_difference_step_derivatives` (the same steps: the simulator's settings with the
     solver's `tolerance`, no warm start, a fresh SimulatorData each; `sim` is not changed). The inputs
     move by `eps` times the direction, scaled down when the direction is longer than 1 (its max norm)."""
     import pinocchio as pin  # noqa: PLC0415
