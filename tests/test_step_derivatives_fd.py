@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from stiction.derivatives import StepDerivatives, finite_difference_step_derivatives
+from stiction.derivatives import StepDerivatives, finite_difference_step_derivatives, finite_difference_step_jvp
 from stiction.scene import build_scene
 from stiction.simulator import Simulator
 
@@ -266,6 +266,23 @@ def test_reference_flags_a_mode_change():
     assert d.boundary[list(report.changed_contacts)].all()
 
 
+def test_jvp_is_the_jacobian_times_the_direction():
+    """finite_difference_step_jvp(dq, dv, dtau) = the full reference's blocks times the direction, on
+    Solo-12 standing (18 dof, 4 feet sticking), to 1e-6 of the product's size."""
+    sim = Simulator("solo12-stand")
+    sim.rollout(0.2)
+    rng = np.random.default_rng(3)
+    dq, dv, dtau = rng.normal(size=(3, 18))
+    d = finite_difference_step_derivatives(sim)
+    q_before = sim.data.q.copy()
+    jq, jv = finite_difference_step_jvp(sim, dq, dv, dtau)
+    assert np.array_equal(sim.data.q, q_before)
+    expected_q = d.dq_dq @ dq + d.dq_dv @ dv + d.dq_dtau @ dtau
+    expected_v = d.dv_dq @ dq + d.dv_dv @ dv + d.dv_dtau @ dtau
+    assert np.abs(jq - expected_q).max() <= 1e-6 * np.abs(expected_q).max()
+    assert np.abs(jv - expected_v).max() <= 1e-6 * np.abs(expected_v).max()
+
+
 def test_reference_rejects_bad_input():
     sim = Simulator("cube-slide")
     with pytest.raises(ValueError, match="scheme"):
@@ -274,6 +291,8 @@ def test_reference_rejects_bad_input():
         finite_difference_step_derivatives(sim, eps=0.0)
     with pytest.raises(ValueError, match="timestep"):
         finite_difference_step_derivatives(Simulator("cube-slide", mode="rk4", dt=1e-4))
+    with pytest.raises(ValueError, match="finite"):
+        finite_difference_step_jvp(sim, np.full(6, np.nan), np.zeros(6))
 
 
 # --- the analytic derivatives against the reference ---------------------------------------------------
