@@ -56,12 +56,15 @@ def test_chained_sensitivity_matches_trajectory_differences(which):
 
 
 def test_analytic_sensitivity_matches_fd():
+    """The chain through step_derivatives() against the chain of central differences, to 1e-5 (the full
+    finite-difference reference in place of step_derivatives gives 2.9e-6 here: the sum of the cube's
+    corner μ columns carries the split of its indeterminate normal forces)."""
     if not hasattr(Simulator, "step_derivatives"):
         pytest.skip("Simulator.step_derivatives is not built yet (issue 26, the analytic half)")
     exp = cs.experiments(quick=True)[0]
     _, _, fd, _ = cs.simulate(exp, exp.mu, exp.mass, "fd")
     _, _, analytic, _ = cs.simulate(exp, exp.mu, exp.mass, "analytic")
-    assert np.abs(analytic - fd).max() <= 1e-6 * np.abs(fd).max()
+    assert np.abs(analytic - fd).max() <= 1e-5 * np.abs(fd).max()
 
 
 def test_identification_without_noise_is_exact():
