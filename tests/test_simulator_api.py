@@ -81,6 +81,19 @@ def test_mu_override_changes_the_physics():
     assert Simulator("cube-slide").scene.contacts[0].mu == 0.5  # the scene itself is untouched
 
 
+def test_mu_override_keeps_every_other_contact_field():
+    """A mu override copies the contacts: every field but mu must survive (a pair's ``patch`` was
+    dropped once, turning pile-24's contact patches into coal's single points)."""
+    base, over = Simulator("pile-24"), Simulator("pile-24", mu=0.3)
+    assert any(p.patch for p in base.scene.pairs)
+    for p, q in zip(base.scene.pairs, over.scene.pairs, strict=True):
+        assert (q.name, q.pair, q.max_contacts, q.model, q.patch, q.mu) == (p.name, p.pair, p.max_contacts, p.model,
+                                                                           p.patch, 0.3)
+    for c, d in zip(base.scene.contacts, over.scene.contacts, strict=True):
+        assert (d.name, d.frame, d.radius, d.halfspace, d.model, d.mu) == (c.name, c.frame, c.radius, c.halfspace,
+                                                                           c.model, 0.3)
+
+
 def test_settings_are_read_only():
     sim = Simulator("cube-slide")
     with pytest.raises(AttributeError, match="read-only"):

@@ -703,7 +703,8 @@ def _with_friction(scene: Scene, mu: float) -> Scene:
 
     sphere_fields = ("name", "frame", "offset", "radius", "halfspace", "model")
     contacts = [copy_contact(c, _core.SphereContact, sphere_fields) for c in scene.contacts]
-    pairs = [copy_contact(p, _core.GeometryPairContact, ("name", "pair", "max_contacts", "model")) for p in scene.pairs]
+    pairs = [copy_contact(p, _core.GeometryPairContact, ("name", "pair", "max_contacts", "model", "patch"))
+             for p in scene.pairs]
     return dataclasses.replace(scene, contacts=contacts, pairs=pairs, mu=mu)
 
 
