@@ -504,6 +504,9 @@ void exposeSimulator() {
     checkedMember(c, "patch", &GeometryPairContact::patch,
                   "true: coal's contact patch (a manifold for flat faces, up to max_contacts vertices); "
                   "false: coal's contact points");
+    checkedMember(c, "dynamic", &GeometryPairContact::dynamic,
+                  "true: a pool entry (pair ignored): each step the broad phase gives it a pair of overlapping "
+                  "shapes, kept while they overlap");
   }
   {
     bp::class_<PointAnchor> c("PointAnchor", "A frame point held at a world point: 3 bilateral rows.");
