@@ -62,7 +62,7 @@ def make_shape(kind: str, rng: np.random.Generator):
         points = directions / np.linalg.norm(directions, axis=1)[:, None] * rng.uniform(0.03, 0.045, (MESH_POINTS, 1))
         hull = _convex(points)
         com = np.asarray(hull.computeCOM(), dtype=float)
-        shape = _convex(np.array([hull.points(i) for i in range(hull.num_points)]) - com)
+        shape = _convex(np.array(hull.points()) - com)
     else:
         raise SceneError(f"array.mix: unknown shape {kind!r} ({did_you_mean(kind, SHAPES)}shapes: {', '.join(SHAPES)})")
     volume = float(shape.computeVolume())
@@ -83,7 +83,7 @@ def shape_parameters(shape) -> dict:
     if name == "Cylinder":
         return {"kind": "cylinder", "radius": float(shape.radius), "half_length": float(shape.halfLength)}
     if name == "Convex":
-        return {"kind": "mesh", "vertices": np.array([shape.points(i) for i in range(shape.num_points)])}
+        return {"kind": "mesh", "vertices": np.array(shape.points())}
     raise ValueError(f"no parameters for a coal {name}")
 
 
