@@ -31,7 +31,7 @@ SHAPES = ("box", "sphere", "capsule", "cylinder", "mesh")
 DEFAULT_MIX = SHAPES
 PAIRS_PER_BODY = 6  # pool entries per body (a body in a settled pile overlaps ~4-8 boxes of others, walls, floor)
 WALL_THICKNESS = 0.2  # m
-MESH_POINTS = 12  # random points whose convex hull is a "mesh" body
+MESH_POINTS = 16  # random points whose convex hull is a "mesh" body
 
 
 def _convex(points: np.ndarray):
@@ -46,7 +46,7 @@ def _convex(points: np.ndarray):
 def make_shape(kind: str, rng: np.random.Generator):
     """One body of `kind`: (coal shape centred on its centre of mass, mass, 3 x 3 inertia about the
     centre of mass, bounding radius). A mesh is the convex hull of MESH_POINTS random points in a
-    ball of 4.5 cm, moved so that its centre of mass is the origin."""
+    shell of 4-4.5 cm radius, moved so that its centre of mass is the origin."""
     import coal
 
     if kind == "box":
@@ -59,7 +59,7 @@ def make_shape(kind: str, rng: np.random.Generator):
         shape = coal.Cylinder(0.035, 0.07)  # radius, length
     elif kind == "mesh":
         directions = rng.normal(size=(MESH_POINTS, 3))
-        points = directions / np.linalg.norm(directions, axis=1)[:, None] * rng.uniform(0.03, 0.045, (MESH_POINTS, 1))
+        points = directions / np.linalg.norm(directions, axis=1)[:, None] * rng.uniform(0.04, 0.045, (MESH_POINTS, 1))
         hull = _convex(points)
         com = np.asarray(hull.computeCOM(), dtype=float)
         shape = _convex(np.array(hull.points()) - com)
