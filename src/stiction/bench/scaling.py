@@ -104,6 +104,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--layout", choices=list(LAYOUTS), default="grid",
                         help="cubes side by side on the ground (default) or stacked; pile: mixed shapes dropped "
                         "into a bin, beside MuJoCo interleaved (sizes: bodies)")
+    parser.add_argument("--warmup", type=_positive_int, default=None,
+                        help="--layout pile: untimed steps of both simulators before the timed ones (default 300: "
+                        "the bodies landing)")
     parser.add_argument("--plot", metavar="FILE.png", help="the log-log chart (also written to --out)")
 
 
@@ -118,7 +121,10 @@ def cases(args) -> list[dict]:
         for n in bodies:
             if n < 1:
                 raise ValueError(f"--layout pile: body counts must be >= 1, got {n}")
-        return [{"scene": f"pile-mix-{n}", "layout": "pile", "bodies": n, "steps": steps} for n in bodies]
+        warmup = getattr(args, "warmup", None)
+        warmup = pile_scaling.WARMUP_STEPS if warmup is None else warmup
+        return [{"scene": f"pile-mix-{n}", "layout": "pile", "bodies": n, "steps": steps, "warmup": warmup}
+                for n in bodies]
     sizes = args.sizes or ([4, 16, 64] if args.quick else [4, 16, 64, 128, 256])
     given = getattr(args, "steps", None)  # an explicit --steps is honoured, --quick or not
     steps = given if given is not None else (QUICK_STEPS if getattr(args, "quick", False) else DEFAULT_STEPS)
@@ -126,6 +132,8 @@ def cases(args) -> list[dict]:
         raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {args.layout!r}")
     if steps < 1:
         raise ValueError(f"--steps must be >= 1, got {steps}")
+    if getattr(args, "warmup", None) is not None:
+        raise ValueError("--warmup applies to --layout pile only")
     for contacts in sizes:
         if contacts < 4 or contacts % 4:
             raise ValueError(f"contact counts must be positive multiples of 4 (4 corners per cube), got {contacts}")
