@@ -100,6 +100,7 @@ bool beginStep(const SimulatorModel& sim, SimulatorData& sd) {
     sd.reference_speed = sim.model.nv > 0 ? sd.v.cwiseAbs().maxCoeff() : 0.0;
     sd.reference_time = sd.t;
     sd.reference_penetration = 0.0;
+    sd.work->broad.ready = false;  // a new trajectory: the pool's entries handed out afresh (broad_phase.hpp)
   }
   return first;
 }
