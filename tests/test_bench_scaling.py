@@ -41,8 +41,8 @@ def test_tower_layout_stacks_the_cubes(capsys):
     for r in out["rows"]:
         assert r["all_converged"] and r["max_penetration"] <= 1e-9 and r["max_body_drift"] <= 1e-9
     with pytest.raises(SystemExit) as exc:
-        main(["bench", "scaling", "--layout", "pile", "--json"])
-    assert exc.value.code == 2 and "invalid choice: 'pile'" in capsys.readouterr().err
+        main(["bench", "scaling", "--layout", "heap", "--json"])
+    assert exc.value.code == 2 and "invalid choice: 'heap'" in capsys.readouterr().err
 
 
 def test_steps_must_be_positive_and_an_explicit_value_is_honoured(capsys):

@@ -198,6 +198,7 @@ class FormulationSettings:
 class GeometryPairContact:
     """A collision pair of the GeometryModel handled by coal (general shapes)."""
     def __init__(self) -> None: ...
+    dynamic: bool
     max_contacts: int
     model: ContactModel
     mu: float
@@ -318,6 +319,9 @@ class SimulatorData:
 
     @property
     def parts(self) -> int: ...
+
+    @property
+    def pool_pairs(self) -> numpy.ndarray: ...
 
     @property
     def position_error(self) -> numpy.ndarray: ...

@@ -315,8 +315,15 @@ def _build_scene(cfg: dict, default_name: str, base_dir) -> Scene:
             model, visual, q0, contacts = _grid_bodies(a["urdf"], a["count"], a["spacing"], mu, base_dir, cmodel)
         elif cfg["array"] is not None and cfg["array"]["layout"] == "pile":
             a = cfg["array"]
-            model, visual, q0, contacts, pile_geometry, pile_pairs = _pile_bodies(
-                a["urdfs"], a["count"], a["spacing"], a["seed"], mu, base_dir, cmodel)
+            if a["mix"] is not None:  # shapes of every kind in a bin, every contact through coal (pile.py)
+                from .pile import mixed_pile
+
+                model, visual, q0, pile_geometry, pile_pairs = mixed_pile(
+                    a["count"], a["seed"], a["mix"], a["spacing"], a["bin"], mu, a["pairs_per_body"], cmodel)
+                contacts = []
+            else:
+                model, visual, q0, contacts, pile_geometry, pile_pairs = _pile_bodies(
+                    a["urdfs"], a["count"], a["spacing"], a["seed"], mu, base_dir, cmodel)
         else:
             paths = cfg["bodies"] if cfg["bodies"] is not None else [cfg["array"]["urdf"]] * cfg["array"]["count"]
             model, visual, q0, contacts, halfspaces = _stacked_bodies(paths, mu, halfspaces, base_dir, cmodel)

@@ -216,6 +216,14 @@ ARRAY = Table("array", "An array of free bodies (instead of `robot`, `urdf` or `
     Key("urdfs", "strings", "pile: the box and ball URDFs each body is drawn from (a box or sphere visual)",
         ("cube.urdf", "ball.urdf"), nonempty=True),
     Key("seed", "int", "pile: the random seed of the bodies' kinds, positions and orientations", 0, low=0),
+    Key("mix", "strings", "pile: the shapes each body is drawn from, uniformly (repeat one to weigh it): box, "
+        "sphere, capsule, cylinder, mesh (a convex hull of random points); dropped into a bin, every contact "
+        "(body, floor, walls: mu of [ground]) through coal, the pairs found each step by the broad phase "
+        "(stiction.pile). Instead of `urdfs`", nonempty=True),
+    Key("bin", "float", "pile with `mix`: the bin's half width in m (default: rows of ceil(sqrt(count / 3)) "
+        "bodies on the drop lattice)", low=0.0, low_open=True),
+    Key("pairs_per_body", "int", "pile with `mix`: pool entries (pairs of shapes in contact range at once, 4 "
+        "contact slots each) per body", 6, low=1, high=64),
 ))
 
 CONTROLLER = Table("controller", "A controller run before every step by `Simulator.rollout` and `stiction simulate` "
@@ -398,9 +406,14 @@ def validate_scene(cfg: dict, source: str = "scene") -> dict:
             layout = out["array"]["layout"]
             if layout == "tower" and out["array"]["spacing"] is not None:
                 raise SceneError("array.spacing applies to layout = \"grid\" or \"pile\" only")
-            for key in ("urdfs", "seed"):
+            for key in ("urdfs", "seed", "mix", "bin", "pairs_per_body"):
                 if layout != "pile" and key in cfg["array"]:
                     raise SceneError(f"array.{key} applies to layout = \"pile\" only")
+            for key in ("bin", "pairs_per_body"):
+                if key in cfg["array"] and "mix" not in cfg["array"]:
+                    raise SceneError(f"array.{key} applies to a pile with `mix` only")
+            if "mix" in cfg["array"] and "urdfs" in cfg["array"]:
+                raise SceneError("array.mix and array.urdfs: a pile draws its bodies from one of them")
             if layout == "pile" and "urdf" in cfg["array"]:
                 raise SceneError("array.urdf: a pile draws its bodies from `urdfs`")
         robot_scene = any(out[k] is not None for k in ("robot", "urdf", "mjcf"))

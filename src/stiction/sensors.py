@@ -68,6 +68,9 @@ def contact_sides(scene) -> list[tuple[str | None, str | None]]:
             minus = model.frames[h.frame].name
         sides.append((plus, minus))
     for p in scene.pairs:
+        if p.dynamic:  # a pool entry: its two bodies change from step to step (stiction.pile); no frame's
+            sides += [(None, None)] * p.max_contacts
+            continue
         pair = scene.geometry.collisionPairs[p.pair]
         first_joint, first = _geometry_frame(model, scene.geometry, pair.first)
         second_joint, second = _geometry_frame(model, scene.geometry, pair.second)

@@ -216,6 +216,30 @@ NdArray get_pair_points(const SimulatorData& d) { return readOnlyCopy(Eigen::Mat
 NdArray get_pair_normals(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.slot_normal)); }
 NdArray get_pair_t1(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.slot_t1)); }
 NdArray get_pair_t2(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.slot_t2)); }
+// The broad phase's pool (broad_phase.hpp): per held entry (pair index, first geometry, second geometry).
+NdArray get_pool_pairs(const SimulatorData& d) {
+  const auto& geoms = d.work->broad.geoms;
+  int held = 0;
+  for (const auto& g : geoms) held += g[0] >= 0;
+  Eigen::MatrixXd out(held, 3);
+  int r = 0;
+  for (std::size_t p = 0; p < geoms.size(); ++p)
+    if (geoms[p][0] >= 0) out.row(r++) << static_cast<double>(p), geoms[p][0], geoms[p][1];
+  return readOnlyCopy(out);
+}
+// Sweep-and-prune over boxes given as 3 x n lower and upper corners: the overlapping pairs (a < b), k x 2.
+NdArray sweepAndPruneOf(const bp::object& lower_in, const bp::object& upper_in) {
+  const Eigen::MatrixXd lower = toMatrix(lower_in, "_sweep_and_prune: lower"),
+                        upper = toMatrix(upper_in, "_sweep_and_prune: upper");
+  if (lower.rows() != 3 || upper.rows() != 3 || lower.cols() != upper.cols())
+    throw std::invalid_argument("_sweep_and_prune: lower and upper must both be 3 x n");
+  std::vector<int> order;
+  std::vector<std::pair<int, int>> pairs;
+  sweepAndPrune(Eigen::Matrix3Xd(lower), Eigen::Matrix3Xd(upper), order, pairs, [](int, int) { return false; });
+  Eigen::MatrixXd out(static_cast<Eigen::Index>(pairs.size()), 2);
+  for (std::size_t k = 0; k < pairs.size(); ++k) out.row(static_cast<Eigen::Index>(k)) << pairs[k].first, pairs[k].second;
+  return readOnlyCopy(out);
+}
 // Sensors of the last step (src/cpp/sim/sensors.cpp; Simulator.sensors() reads them)
 NdArray get_contact_force(const SimulatorData& d) { return readOnlyCopy(Eigen::MatrixXd(d.out.contact_force)); }
 NdArray get_accelerometer(const SimulatorData& d) { return readOnlyCopy(d.out.accelerometer); }
@@ -504,6 +528,9 @@ void exposeSimulator() {
     checkedMember(c, "patch", &GeometryPairContact::patch,
                   "true: coal's contact patch (a manifold for flat faces, up to max_contacts vertices); "
                   "false: coal's contact points");
+    checkedMember(c, "dynamic", &GeometryPairContact::dynamic,
+                  "true: a pool entry (pair ignored): each step the broad phase gives it a pair of overlapping "
+                  "shapes, kept while they overlap");
   }
   {
     bp::class_<PointAnchor> c("PointAnchor", "A frame point held at a world point: 3 bilateral rows.");
@@ -635,6 +662,9 @@ void exposeSimulator() {
       .add_property("pair_t1", &get_pair_t1,
                     "3 x candidates: each coal pair slot's first tangent (rows t1, t2, n: the slot's lambda)")
       .add_property("pair_t2", &get_pair_t2, "3 x candidates: each coal pair slot's second tangent")
+      .add_property("pool_pairs", &get_pool_pairs,
+                    "k x 3: the dynamic pair entries held at the last detection (pair index, first geometry, "
+                    "second geometry; stiction.pile)")
       .add_property("contact_force", &get_contact_force,
                     "3 x candidates: each candidate's force in the world frame after the last step, N (on the "
                     "contact's own body: the sphere's, a coal pair's second geometry's; 0 inactive)")
@@ -691,6 +721,9 @@ void exposeSimulator() {
       (bp::arg("sim"), bp::arg("Q")),
       "world placement of every joint at each configuration (a row of Q): N x (12 joints), per joint the "
       "rotation (column-major) then the translation");
+  bp::def("_sweep_and_prune", &sweepAndPruneOf, (bp::arg("lower"), bp::arg("upper")),
+          "the broad phase's sweep-and-prune (broad_phase.hpp) over boxes given by 3 x n lower and upper corners: "
+          "the overlapping pairs (a < b) as a k x 2 array");
   bp::def("build_contact_problem", &doBuild,
           (bp::arg("sim"), bp::arg("data"), bp::arg("q"), bp::arg("v"), bp::arg("delta"), bp::arg("zeta"),
            bp::arg("implicit_pd_step") = 0.0),

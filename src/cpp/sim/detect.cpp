@@ -6,6 +6,8 @@
 
 #include <pinocchio/algorithm/geometry.hpp>
 #include <pinocchio/collision/collision.hpp>
+#include <coal/collision.h>
+#include <coal/contact_patch.h>
 
 #include "stages.hpp"
 
@@ -112,31 +114,63 @@ void detectContacts(const SimulatorModel& sim, SimulatorData& sd) {
     const pinocchio::GeometryObject& object = sim.geometry.geometryObjects[g];
     sd.work->geometry_data.oMg[g] = jointPlacement(sim, sd, object.parentJoint) * object.placement;
   }
+  if (!sim.dynamic_pairs.empty()) assignDynamicPairs(sim, sd);  // the pool's pairs (broad_phase.cpp)
   int slot = static_cast<int>(sim.contacts.size());
   std::array<int, 64> chosen;
-  for (const GeometryPairContact& g : sim.pairs) {
-    const pinocchio::CollisionPair& cp = sim.geometry.collisionPairs[g.pair];
-    coal::CollisionResult& res = sd.work->geometry_data.collisionResults[g.pair];
-    res.clear();
-    // broad phase: bounding spheres farther apart than the activation distance cannot touch
-    const double reach = sim.geometry_radius[cp.first] + sim.geometry_radius[cp.second] +
-                         sim.settings.activation_distance;
-    int found = 0;
-    if (!std::isfinite(reach) ||
-        (sd.work->geometry_data.oMg[cp.first].act(sim.geometry_center[cp.first]) -
-         sd.work->geometry_data.oMg[cp.second].act(sim.geometry_center[cp.second])).norm() <= reach) {
-      pinocchio::computeCollision(sim.geometry, sd.work->geometry_data, g.pair);
-      found = std::min<int>(static_cast<int>(res.numContacts()), g.max_contacts);
-    }
+  for (std::size_t p = 0; p < sim.pairs.size(); ++p) {
+    const GeometryPairContact& g = sim.pairs[p];
+    const coal::CollisionResult* result = nullptr;
     const coal::ContactPatch* patch = nullptr;
-    if (g.patch && found > 0) {
-      pinocchio::computeContactPatch(sim.geometry, sd.work->geometry_data, g.pair);
-      const coal::ContactPatchResult& patches = sd.work->geometry_data.contactPatchResults[g.pair];
-      if (patches.numContactPatches() > 0 && patches.getContactPatch(0).size() > 0) {
-        patch = &patches.getContactPatch(0);
-        found = spreadVertices(*patch, g.max_contacts, chosen);
+    int found = 0;
+    if (g.dynamic) {  // the pair its entry holds (none: every slot empty); the broad phase's boxes overlap
+      BroadPhaseState& bp = sd.work->broad;
+      const auto held = bp.geoms[p];
+      coal::CollisionResult& res = bp.result[p];
+      res.clear();
+      result = &res;
+      if (held[0] >= 0) {
+        const pinocchio::GeometryObject& first = sim.geometry.geometryObjects[static_cast<std::size_t>(held[0])];
+        const pinocchio::GeometryObject& second = sim.geometry.geometryObjects[static_cast<std::size_t>(held[1])];
+        const pinocchio::SE3& oM1 = sd.work->geometry_data.oMg[static_cast<std::size_t>(held[0])];
+        const pinocchio::SE3& oM2 = sd.work->geometry_data.oMg[static_cast<std::size_t>(held[1])];
+        const coal::Transform3s tf1(oM1.rotation(), oM1.translation()), tf2(oM2.rotation(), oM2.translation());
+        coal::collide(first.geometry.get(), tf1, second.geometry.get(), tf2, bp.request[p], res);
+        found = std::min<int>(static_cast<int>(res.numContacts()), g.max_contacts);
+        if (g.patch && found > 0) {
+          coal::ContactPatchResult& patches = bp.patches[p];
+          patches.clear();
+          coal::computeContactPatch(first.geometry.get(), tf1, second.geometry.get(), tf2, res, bp.patch_request,
+                                    patches);
+          if (patches.numContactPatches() > 0 && patches.getContactPatch(0).size() > 0) {
+            patch = &patches.getContactPatch(0);
+            found = spreadVertices(*patch, g.max_contacts, chosen);
+          }
+        }
+      }
+    } else {
+      const pinocchio::CollisionPair& cp = sim.geometry.collisionPairs[g.pair];
+      coal::CollisionResult& res = sd.work->geometry_data.collisionResults[g.pair];
+      res.clear();
+      result = &res;
+      // broad phase: bounding spheres farther apart than the activation distance cannot touch
+      const double reach = sim.geometry_radius[cp.first] + sim.geometry_radius[cp.second] +
+                           sim.settings.activation_distance;
+      if (!std::isfinite(reach) ||
+          (sd.work->geometry_data.oMg[cp.first].act(sim.geometry_center[cp.first]) -
+           sd.work->geometry_data.oMg[cp.second].act(sim.geometry_center[cp.second])).norm() <= reach) {
+        pinocchio::computeCollision(sim.geometry, sd.work->geometry_data, g.pair);
+        found = std::min<int>(static_cast<int>(res.numContacts()), g.max_contacts);
+      }
+      if (g.patch && found > 0) {
+        pinocchio::computeContactPatch(sim.geometry, sd.work->geometry_data, g.pair);
+        const coal::ContactPatchResult& patches = sd.work->geometry_data.contactPatchResults[g.pair];
+        if (patches.numContactPatches() > 0 && patches.getContactPatch(0).size() > 0) {
+          patch = &patches.getContactPatch(0);
+          found = spreadVertices(*patch, g.max_contacts, chosen);
+        }
       }
     }
+    const coal::CollisionResult& res = *result;
     for (int k = 0; k < g.max_contacts; ++k, ++slot) {
       if (k >= found) {
         sd.out.gaps[slot] = std::numeric_limits<double>::infinity();

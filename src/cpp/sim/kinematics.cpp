@@ -57,9 +57,14 @@ struct BlockBodies {
   pinocchio::JointIndex plus = 0, minus = 0;
 };
 
-BlockBodies contactBodies(const SimulatorModel& sim, int i) {
+BlockBodies contactBodies(const SimulatorModel& sim, const SimulatorData& sd, int i) {
   if (sim.slot_pair[i] >= 0) {  // coal: geometry 2's material point w.r.t. geometry 1's
-    const pinocchio::CollisionPair& cp = sim.geometry.collisionPairs[sim.pairs[sim.slot_pair[i]].pair];
+    const GeometryPairContact& g = sim.pairs[sim.slot_pair[i]];
+    if (g.dynamic) {  // the pair the broad phase gave this entry
+      const auto& held = sd.work->broad.geoms[static_cast<std::size_t>(sim.slot_pair[i])];
+      return {sim.geometry.geometryObjects[held[1]].parentJoint, sim.geometry.geometryObjects[held[0]].parentJoint};
+    }
+    const pinocchio::CollisionPair& cp = sim.geometry.collisionPairs[g.pair];
     return {sim.geometry.geometryObjects[cp.second].parentJoint, sim.geometry.geometryObjects[cp.first].parentJoint};
   }
   const SphereContact& c = sim.contacts[i];
@@ -202,7 +207,7 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
   sd.work->parts_share_rows = false;
   Eigen::Index rows = 0;
   for (int i : sd.out.active) {
-    reserveRows(sim, sd, contactBodies(sim, i), rows, sd.out.candidate_rows[i]);
+    reserveRows(sim, sd, contactBodies(sim, sd, i), rows, sd.out.candidate_rows[i]);
     rows += sd.out.candidate_rows[i];
   }
   for (const PointAnchor& a : sim.anchors) {
@@ -250,7 +255,7 @@ void contactJacobians(const SimulatorModel& sim, SimulatorData& sd, const Eigen:
     sd.work->blocks.push_back(block);
   };
   for (int i : sd.out.active) {
-    const BlockBodies bodies = contactBodies(sim, i);
+    const BlockBodies bodies = contactBodies(sim, sd, i);
     const int k = sd.out.candidate_rows[i];
     if (sim.slot_pair[i] >= 0) {
       // coal contact: relative velocity of geometry 2's material point w.r.t. geometry 1's

@@ -277,7 +277,7 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
   slot_pair.assign(contacts.size(), -1);
   for (std::size_t p = 0; p < pairs.size(); ++p) {
     const GeometryPairContact& g = pairs[p];
-    if (g.pair >= geometry.collisionPairs.size())
+    if (!g.dynamic && g.pair >= geometry.collisionPairs.size())
       throw std::invalid_argument("pair '" + g.name + "': collision pair index " + std::to_string(g.pair) +
                                   " does not exist (the geometry model has " +
                                   std::to_string(geometry.collisionPairs.size()) + " pairs)");
@@ -288,13 +288,22 @@ SimulatorModel::SimulatorModel(const pinocchio::Model& model_, std::vector<HalfS
     if (g.model == ContactModel::kPlanar)
       throw std::invalid_argument("pair '" + g.name + "': the planar contact model applies to sphere contacts only "
                                   "(a coal pair is spatial or frictionless)");
-    if (g.patch)
+    if (g.dynamic && g.patch) {
+      for (const pinocchio::GeometryObject& object : geometry.geometryObjects)
+        if (object.geometry->getObjectType() == coal::OT_BVH)
+          throw std::invalid_argument("pair '" + g.name + "': a dynamic pair with contact patches meets every "
+                                      "shape; '" + object.name + "' is a mesh (set patch = false)");
+    } else if (g.patch)
       for (pinocchio::GeomIndex gi : {geometry.collisionPairs[g.pair].first, geometry.collisionPairs[g.pair].second})
         if (geometry.geometryObjects[gi].geometry->getObjectType() == coal::OT_BVH)
           throw std::invalid_argument("pair '" + g.name + "': contact patches need convex shapes or half-spaces; '" +
                                       geometry.geometryObjects[gi].name + "' is a mesh (set patch = false)");
+    pair_first_slot.push_back(static_cast<int>(slot_pair.size()));
+    if (g.dynamic) dynamic_pairs.push_back(static_cast<int>(p));
     for (int k = 0; k < g.max_contacts; ++k) slot_pair.push_back(static_cast<int>(p));
   }
+  if (!dynamic_pairs.empty())  // the broad phase boxes each shape from its local AABB
+    for (const pinocchio::GeometryObject& object : geometry.geometryObjects) object.geometry->computeLocalAABB();
   num_candidates = static_cast<int>(slot_pair.size());
   deriveJointRows(model, settings, joint_limits, joint_friction, effort_limit, joint_damping, friction_dofs, effort_dofs);
   // Box rows have no law in the penalty formulation (a spring per contact) or in Pinocchio's solvers
@@ -353,6 +362,7 @@ SimulatorWorkspace::SimulatorWorkspace(const SimulatorModel& sim)
   fs.exact_solver = sim.settings.solver;
   solver = makeFormulation(sim.settings.formulation, fs);
   for (const GeometryPairContact& g : sim.pairs) {
+    if (g.dynamic) continue;  // (its request is the broad phase's, per entry)
     coal::CollisionRequest& req = geometry_data.collisionRequests[g.pair];
     req.num_max_contacts = static_cast<size_t>(g.max_contacts);
     req.security_margin = sim.settings.activation_distance;

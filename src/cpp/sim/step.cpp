@@ -100,6 +100,7 @@ bool beginStep(const SimulatorModel& sim, SimulatorData& sd) {
     sd.reference_speed = sim.model.nv > 0 ? sd.v.cwiseAbs().maxCoeff() : 0.0;
     sd.reference_time = sd.t;
     sd.reference_penetration = 0.0;
+    sd.work->broad.ready = false;  // a new trajectory: the pool's entries handed out afresh (broad_phase.hpp)
   }
   return first;
 }
@@ -136,7 +137,11 @@ void checkBlowUp(const SimulatorModel& sim, const SimulatorData& sd) {
       std::max(0.1, 10.0 * sim.settings.activation_distance) + 10.0 * sd.reference_penetration;
   for (int i : sd.out.active) {
     if (-sd.out.gaps[i] > depth_limit) {
-      const std::string name = sim.slot_pair[i] < 0 ? sim.contacts[i].name : sim.pairs[sim.slot_pair[i]].name;
+      std::string name = sim.slot_pair[i] < 0 ? sim.contacts[i].name : sim.pairs[sim.slot_pair[i]].name;
+      if (sim.slot_pair[i] >= 0 && sim.pairs[sim.slot_pair[i]].dynamic) {  // (which shapes it holds)
+        const auto& held = sd.work->broad.geoms[static_cast<std::size_t>(sim.slot_pair[i])];
+        name += " (" + sim.geometry.geometryObjects[held[0]].name + "|" + sim.geometry.geometryObjects[held[1]].name + ")";
+      }
       std::ostringstream os;
       os << "simulation diverged (blow-up) at t = " << sd.t << ": contact '" << name << "' penetrates " << -sd.out.gaps[i]
          << " m, deeper than the bound " << depth_limit << " m" << hint;
@@ -193,7 +198,12 @@ void contactsAtState(const SimulatorModel& sim, SimulatorData& sd) {
   // coal warm-starts each pair's GJK from its last answer: keep the step's own history
   std::vector<std::pair<coal::Vec3s, coal::support_func_guess_t>> guesses;
   guesses.reserve(sim.pairs.size());
+  const BroadPhaseState broad = sd.work->broad;  // (the pool's entries too)
   for (const GeometryPairContact& g : sim.pairs) {
+    if (g.dynamic) {
+      guesses.emplace_back();
+      continue;
+    }
     const coal::CollisionRequest& req = sd.work->geometry_data.collisionRequests[g.pair];
     guesses.emplace_back(req.cached_gjk_guess, req.cached_support_func_guess);
   }
@@ -201,7 +211,9 @@ void contactsAtState(const SimulatorModel& sim, SimulatorData& sd) {
   detectContacts(sim, sd);
   selectJointRows(sim, sd, sd.q, sd.v, 0.0);
   contactJacobians(sim, sd, sd.v);
+  sd.work->broad = broad;
   for (std::size_t p = 0; p < sim.pairs.size(); ++p) {
+    if (sim.pairs[p].dynamic) continue;
     coal::CollisionRequest& req = sd.work->geometry_data.collisionRequests[sim.pairs[p].pair];
     req.cached_gjk_guess = guesses[p].first;
     req.cached_support_func_guess = guesses[p].second;

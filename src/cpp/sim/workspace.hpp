@@ -14,6 +14,7 @@
 #include <pinocchio/multibody/data.hpp>
 #include <pinocchio/multibody/geometry.hpp>
 
+#include "broad_phase.hpp"
 #include "stiction/contact_problem.hpp"
 #include "stiction/delassus.hpp"
 #include "stiction/formulation.hpp"
@@ -136,6 +137,7 @@ struct SimulatorWorkspace {
   // Detection: coal's geometry placements and results (its cached GJK guesses carry over), and
   // each half-space's world axes.
   pinocchio::GeometryData geometry_data;
+  BroadPhaseState broad;  ///< the pool of dynamic pairs (broad_phase.hpp)
   Eigen::Matrix3Xd plane_normal, plane_t1, plane_t2;
   Eigen::VectorXd plane_offset;
 

@@ -741,3 +741,54 @@ def contact_accuracy(scene, t: np.ndarray, Q: np.ndarray, settle: float | None =
         drift = float(np.linalg.norm(move, axis=-1).max())
     return {"drift": drift, "penetration": float(max(0.0, -gaps.min())), "closed": int(closed.sum()),
             "finite": bool(np.isfinite(Q).all())}
+
+
+def pile_spec(scene):
+    """The MuJoCo twin of a mixed pile (``[array] layout = "pile"`` with ``mix``, stiction.pile): each
+    body a free body at the scene's initial pose with the same mass and inertia (explicit, about its
+    centre of mass), the same coal shape as a MuJoCo geom (box, sphere, capsule, cylinder; a convex
+    mesh from the hull's vertices, which MuJoCo hulls again), the bin's floor and walls as the same
+    world boxes; every geom mu of the scene (condim 3); :func:`accurate_options` at the scene's dt with
+    MuJoCo's Euler integrator (as the cube scaling twins)."""
+    from ..pile import shape_parameters  # noqa: PLC0415
+
+    mj = _mujoco()
+    model = scene.model
+    if model.njoints < 2 or any(model.joints[j].shortname() != "JointModelFreeFlyer" for j in range(1, model.njoints)):
+        raise ValueError("pile_spec: the scene's joints must all be free flyers (a pile)")
+    if not scene.pairs or not all(p.dynamic for p in scene.pairs):
+        raise ValueError("pile_spec: a pile with `mix` (its pairs found by the broad phase) is needed")
+    mu = float(scene.pairs[0].mu)
+    spec = mj.MjSpec()
+    spec.compiler.inertiafromgeom = mj.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    bodies = {}
+    q0 = scene.q0.reshape(-1, 7)
+    for j in range(1, model.njoints):
+        x, y, z, qx, qy, qz, qw = q0[j - 1]
+        body = spec.worldbody.add_body(name=model.names[j], pos=[x, y, z], quat=[qw, qx, qy, qz])
+        body.add_freejoint()
+        inertia = model.inertias[j]
+        I = np.asarray(inertia.inertia)
+        body.mass = float(inertia.mass)
+        body.ipos = np.asarray(inertia.lever, dtype=float)
+        body.fullinertia = [I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]]
+        body.explicitinertial = True
+        bodies[j] = body
+    for go in scene.geometry.geometryObjects:
+        p = shape_parameters(go.geometry)
+        where = bodies[go.parentJoint] if go.parentJoint != 0 else spec.worldbody
+        pos, quat = np.asarray(go.placement.translation, dtype=float), _quat_wxyz(go.placement.rotation)
+        kw = {"name": go.name, "pos": list(pos), "quat": quat, "friction": [mu, 0, 0], "condim": 3}
+        if p["kind"] == "box":
+            where.add_geom(type=mj.mjtGeom.mjGEOM_BOX, size=list(p["half"]), **kw)
+        elif p["kind"] == "sphere":
+            where.add_geom(type=mj.mjtGeom.mjGEOM_SPHERE, size=[p["radius"], 0, 0], **kw)
+        elif p["kind"] == "capsule":
+            where.add_geom(type=mj.mjtGeom.mjGEOM_CAPSULE, size=[p["radius"], p["half_length"], 0], **kw)
+        elif p["kind"] == "cylinder":
+            where.add_geom(type=mj.mjtGeom.mjGEOM_CYLINDER, size=[p["radius"], p["half_length"], 0], **kw)
+        else:
+            spec.add_mesh(name=f"{go.name}-mesh", uservert=np.asarray(p["vertices"], dtype=float).ravel().tolist())
+            where.add_geom(type=mj.mjtGeom.mjGEOM_MESH, meshname=f"{go.name}-mesh", **kw)
+    accurate_options(spec, scene.dt, model.gravity.linear, implicit=False)
+    return spec

@@ -13,6 +13,10 @@ a plane, elliptic cones, Newton, tolerance 1e-10, the same masses, mu and dt
 (:func:`stiction.bench.mujoco_twins.cube_array_spec`).
 
 The fitted exponent is the least-squares slope of log(us_per_step) against log(contacts).
+
+``--layout pile``: sizes are body counts of a pile of mixed shapes dropped into a bin, timed
+interleaved with its MuJoCo twin in one process (:mod:`stiction.bench.pile_scaling`); the exponent
+is then against bodies, and us_per_step is the mean step (median_us_per_step beside it).
 """
 from __future__ import annotations
 
@@ -41,7 +45,7 @@ print(json.dumps({"us_per_step": float(np.median([b.mean() for b in blocks])), "
 """
 
 
-LAYOUTS = ("grid", "tower")
+LAYOUTS = ("grid", "tower", "pile")
 
 
 def mujoco_us_per_step(cubes: int, steps: int, warmup: int, layout: str = "grid") -> float | None:
@@ -79,25 +83,48 @@ def fit_exponent(contacts: list[int], us: list[float]) -> float | None:
 NAME = "scaling"
 HELP = "cost per step against contact count: a grid or a tower of cubes, beside MuJoCo"
 FIELDS = ("scene", "layout", "contacts", "steps", "us_per_step", "us_per_contact", "peak_memory_mb",
-          "mujoco_us_per_step", "all_converged", "max_penetration", "max_body_drift")
-KEY_FIELDS = ("layout", "contacts", "steps")
+          "mujoco_us_per_step", "all_converged", "max_penetration", "max_body_drift",
+          # the pile's (None for the cube arrays): stiction.bench.pile_scaling
+          "bodies", "median_us_per_step", "energy_drift", "mujoco_median_us_per_step", "mujoco_contacts",
+          "mujoco_max_penetration", "mujoco_energy_drift")
+PILE_ONLY = FIELDS[11:]
+KEY_FIELDS = ("scene", "steps")
 DEFAULT_WORKERS = 1  # a timing and a peak-memory figure per size: one size at a time on the machine
 WARMUP_STEPS = 20
 DEFAULT_STEPS, QUICK_STEPS = 200, 50
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--sizes", type=int, nargs="+", metavar="N", help="contact counts (multiples of 4)")
+    parser.add_argument("--sizes", type=int, nargs="+", metavar="N",
+                        help="contact counts (multiples of 4); --layout pile: body counts")
     from ..cli import _positive_int  # the CLI's own integer check (called when the CLI builds its parser)
 
     parser.add_argument("--steps", type=_positive_int, default=None,
                         help=f"timed steps per size, >= 1 (default {DEFAULT_STEPS}; --quick {QUICK_STEPS})")
     parser.add_argument("--layout", choices=list(LAYOUTS), default="grid",
-                        help="cubes side by side on the ground (default) or stacked")
+                        help="cubes side by side on the ground (default) or stacked; pile: mixed shapes dropped "
+                        "into a bin, beside MuJoCo interleaved (sizes: bodies)")
+    parser.add_argument("--warmup", type=_positive_int, default=None,
+                        help="--layout pile: untimed steps of both simulators before the timed ones (default 300: "
+                        "the bodies landing)")
     parser.add_argument("--plot", metavar="FILE.png", help="the log-log chart (also written to --out)")
 
 
 def cases(args) -> list[dict]:
+    if args.layout == "pile":
+        from . import pile_scaling
+
+        bodies = args.sizes or ([8, 24] if args.quick else [24, 64, 256])
+        given = getattr(args, "steps", None)
+        steps = given if given is not None else (pile_scaling.QUICK_STEPS if getattr(args, "quick", False)
+                                                 else pile_scaling.DEFAULT_STEPS)
+        for n in bodies:
+            if n < 1:
+                raise ValueError(f"--layout pile: body counts must be >= 1, got {n}")
+        warmup = getattr(args, "warmup", None)
+        warmup = pile_scaling.WARMUP_STEPS if warmup is None else warmup
+        return [{"scene": f"pile-mix-{n}", "layout": "pile", "bodies": n, "steps": steps, "warmup": warmup}
+                for n in bodies]
     sizes = args.sizes or ([4, 16, 64] if args.quick else [4, 16, 64, 128, 256])
     given = getattr(args, "steps", None)  # an explicit --steps is honoured, --quick or not
     steps = given if given is not None else (QUICK_STEPS if getattr(args, "quick", False) else DEFAULT_STEPS)
@@ -105,14 +132,22 @@ def cases(args) -> list[dict]:
         raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {args.layout!r}")
     if steps < 1:
         raise ValueError(f"--steps must be >= 1, got {steps}")
+    if getattr(args, "warmup", None) is not None:
+        raise ValueError("--warmup applies to --layout pile only")
     for contacts in sizes:
         if contacts < 4 or contacts % 4:
             raise ValueError(f"contact counts must be positive multiples of 4 (4 corners per cube), got {contacts}")
-    return [{"layout": args.layout, "contacts": c, "steps": steps} for c in sizes]
+    return [{"scene": f"cube-{args.layout}-{c}", "layout": args.layout, "contacts": c, "steps": steps} for c in sizes]
 
 
 def evaluate(case: dict) -> dict:
     """One size in its own subprocess (its peak memory is that size's), MuJoCo beside it."""
+    if case["layout"] == "pile":
+        from . import pile_scaling
+
+        row = pile_scaling.evaluate(case)
+        return {**row, "us_per_contact": row["us_per_step"] / row["contacts"] if row["contacts"] else None,
+                "max_body_drift": None}
     layout, contacts, steps = case["layout"], case["contacts"], case["steps"]
     cubes = contacts // 4
     out = subprocess.run([sys.executable, "-c", MEASURE, str(cubes), str(steps), str(WARMUP_STEPS), layout],
@@ -125,7 +160,7 @@ def evaluate(case: dict) -> dict:
             "peak_memory_mb": m["peak_memory_mb"],
             "mujoco_us_per_step": mujoco_us_per_step(cubes, steps, WARMUP_STEPS, layout),
             "all_converged": m["all_converged"], "max_penetration": m["max_penetration"],
-            "max_body_drift": m["max_body_drift"]}
+            "max_body_drift": m["max_body_drift"], "bodies": cubes, **{k: None for k in PILE_ONLY if k != "bodies"}}
 
 
 def result_stem(args) -> str:
@@ -135,10 +170,15 @@ def result_stem(args) -> str:
 
 def summarize(rows: list[dict]) -> dict:
     layouts = sorted({r["layout"] for r in rows})
+    size = "bodies" if layouts == ["pile"] else "contacts"  # the pile's cost against bodies
     out = {"layout": layouts[0] if len(layouts) == 1 else layouts,
-           "exponent": fit_exponent([r["contacts"] for r in rows], [r["us_per_step"] for r in rows])}
+           "exponent": fit_exponent([r[size] for r in rows], [r["us_per_step"] for r in rows])}
     mj = [r["mujoco_us_per_step"] for r in rows]
-    out["mujoco_exponent"] = fit_exponent([r["contacts"] for r in rows], mj) if rows and all(mj) else None
+    out["mujoco_exponent"] = fit_exponent([r[size] for r in rows], mj) if rows and all(mj) else None
+    if layouts == ["pile"]:
+        out["exponent_in"] = "bodies"
+        out["ratio_to_mujoco"] = [r["us_per_step"] / r["mujoco_us_per_step"] if r["mujoco_us_per_step"] else None
+                                  for r in rows]
     return out
 
 
@@ -162,15 +202,20 @@ def plot_result(result: dict, path, stamp: dict | None = None) -> None:
     import matplotlib.pyplot as plt
 
     rows = result["rows"]
-    n = [r["contacts"] for r in rows]
+    pile = result.get("layout") == "pile"
+    n = [r["bodies"] if pile else r["contacts"] for r in rows]
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     ax.loglog(n, [r["us_per_step"] for r in rows], "o-", label=f"stiction (exponent {result['exponent']:.2f})")
     if result.get("mujoco_exponent") is not None:
         ax.loglog(n, [r["mujoco_us_per_step"] for r in rows], "s--",
                   label=f"MuJoCo 4.0 (exponent {result['mujoco_exponent']:.2f})")
-    ax.set_xlabel(f"contacts (cube {result.get('layout', 'grid')}, 4 per cube)")
-    ax.set_ylabel("µs per step (median of 10 block means)")
-    ax.set_title("Cost per step against contact count")
+    if pile:
+        ax.set_xlabel("bodies (boxes, spheres, capsules, cylinders, convex hulls dropped into a bin)")
+        ax.set_ylabel("µs per step (mean; timed interleaved with MuJoCo)")
+    else:
+        ax.set_xlabel(f"contacts (cube {result.get('layout', 'grid')}, 4 per cube)")
+        ax.set_ylabel("µs per step (median of 10 block means)")
+    ax.set_title("Cost per step against body count: a pile" if pile else "Cost per step against contact count")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout(rect=(0, 0.03, 1, 1))

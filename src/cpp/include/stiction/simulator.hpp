@@ -81,6 +81,11 @@ struct GeometryPairContact {
   /// it): with `patch`, the points are coal's contact patch (the overlap polygon of the two
   /// support sets, computeContactPatch), reduced to the max_contacts most spread vertices.
   bool patch = false;
+  /// A pool entry instead of a listed pair (`pair` is then ignored): each step the broad phase
+  /// (sweep-and-prune over every geometry's AABB, broad_phase.hpp) finds the overlapping pairs of
+  /// shapes of different joints, and each takes a free entry for as long as it keeps overlapping.
+  /// Detection grows as N, and a scene of N bodies needs ~ a few N entries, not N^2 / 2 pairs.
+  bool dynamic = false;
 };
 
 /// A point of frame `frame` (at `offset`) held at the world point `target`, or
@@ -256,6 +261,8 @@ class SimulatorModel {
   int numCandidates() const { return num_candidates; }
   int num_candidates = 0;
   std::vector<int> slot_pair;  ///< per candidate: -1 for a sphere contact, else its pair
+  std::vector<int> pair_first_slot;  ///< per pair: its first candidate
+  std::vector<int> dynamic_pairs;    ///< the pairs that are pool entries (GeometryPairContact::dynamic)
   /// Broad phase: each geometry's bounding sphere (centre in its joint's frame, radius; a
   /// half-space or plane: infinite), so a pair farther apart than the activation distance
   /// skips coal.
