@@ -8,7 +8,7 @@ import pytest
 from stiction import _core
 from stiction.bench.work_precision import slide_distance
 from stiction.scene import build_scene
-from stiction.simulator import OVERRIDES, Simulator
+from stiction.simulator import OVERRIDES, Simulator, _contact_fields
 
 G = 9.81
 
@@ -92,6 +92,8 @@ def test_mu_override_keeps_every_other_contact_field():
     for c, d in zip(base.scene.contacts, over.scene.contacts, strict=True):
         assert (d.name, d.frame, d.radius, d.halfspace, d.model, d.mu) == (c.name, c.frame, c.radius, c.halfspace,
                                                                            c.model, 0.3)
+    assert {"patch", "max_contacts", "pair", "model"} <= set(_contact_fields(_core.GeometryPairContact))
+    assert {"frame", "offset", "radius", "halfspace", "model"} <= set(_contact_fields(_core.SphereContact))
 
 
 def test_settings_are_read_only():

@@ -691,20 +691,24 @@ def _normalized_configuration(model, q: np.ndarray) -> np.ndarray:
     return _quaternion_check(model, q, "q", strict=False)
 
 
+def _contact_fields(cls) -> list[str]:
+    """Every settable field of a bound contact type (its properties but the `planar` alias of
+    `model`), so that a copy cannot drop one added later."""
+    return [n for n in dir(cls) if not n.startswith("_") and n != "planar" and isinstance(getattr(cls, n), property)]
+
+
 def _with_friction(scene: Scene, mu: float) -> Scene:
     """A copy of the scene with every contact's friction coefficient set to mu."""
 
-    def copy_contact(c, cls, fields):
+    def copy_contact(c, cls):
         out = cls()
-        for f in fields:
+        for f in _contact_fields(cls):
             setattr(out, f, getattr(c, f))
         out.mu = mu
         return out
 
-    sphere_fields = ("name", "frame", "offset", "radius", "halfspace", "model")
-    contacts = [copy_contact(c, _core.SphereContact, sphere_fields) for c in scene.contacts]
-    pairs = [copy_contact(p, _core.GeometryPairContact, ("name", "pair", "max_contacts", "model", "patch"))
-             for p in scene.pairs]
+    contacts = [copy_contact(c, _core.SphereContact) for c in scene.contacts]
+    pairs = [copy_contact(p, _core.GeometryPairContact) for p in scene.pairs]
     return dataclasses.replace(scene, contacts=contacts, pairs=pairs, mu=mu)
 
 
