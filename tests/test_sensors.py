@@ -276,3 +276,41 @@ def test_accelerometer_times_mass_is_the_contact_force(mode):
     expected = np.einsum("kba,kb->ka", R0, traj.frame_force_of("cube")[1:]) / mass
     assert (traj.frame_states[len(traj.t) // 2:] == 2).all()  # sliding
     np.testing.assert_allclose(traj.accelerometer[1:], expected, rtol=0, atol=1e-9 * G)
+
+
+def test_frame_totals_of_a_trajectory_are_those_of_its_recorded_contacts(tmp_path):
+    # frame_force / frame_states are made on first read (simulator._FrameTotals): their values must be
+    # the sums and states of the contacts as recorded, whatever happened to the other fields since, and
+    # survive pickling, asdict and save/load. Reference: a plain loop over frames and contacts.
+    import copy
+    import dataclasses
+    import pickle
+
+    sim = Simulator("pile-24")
+    traj = sim.rollout(0.4)
+    force, states = traj.contact_force.copy(), traj.states.copy()
+    incidence = traj.frame_incidence
+    expected_force = np.zeros((len(traj.t), len(incidence), 3))
+    expected_states = np.zeros((len(traj.t), len(incidence)), dtype=np.int8)
+    for f, row in enumerate(incidence):
+        touching = np.flatnonzero(row)
+        for c in touching:
+            expected_force[:, f] += row[c] * force[:, c]
+        s = states[:, touching]
+        expected_states[:, f] = np.where((s == 2).any(1), 2, np.where((s == 1).any(1), 1, np.where((s == 3).any(1), 3, 0)))
+        expected_states[(s == -1).all(1), f] = -1
+    assert len(incidence) > 2 and (expected_states[1:] > 0).any()
+    clones = [pickle.loads(pickle.dumps(traj)), copy.deepcopy(traj)]
+    traj.contact_force[:] = 0.0  # (in place, before the first read)
+    traj.states[:] = 0
+    for t in [traj] + clones:
+        assert np.allclose(t.frame_force, expected_force, rtol=1e-12, atol=1e-12, equal_nan=True)
+        assert t.frame_states.dtype == np.int8 and np.array_equal(t.frame_states, expected_states)
+    assert np.array_equal(dataclasses.asdict(clones[0])["frame_states"], expected_states)
+    clones[1].save(tmp_path / "t.npz")
+    loaded = Trajectory.load(tmp_path / "t.npz")
+    assert np.allclose(loaded.frame_force, expected_force, rtol=1e-12, atol=1e-12, equal_nan=True)
+    # a field assigned while the totals are pending keeps its value, the other is still computed
+    fresh = sim.rollout(0.01)
+    fresh.frame_force = None
+    assert fresh.frame_force is None and fresh.frame_states.shape == (len(fresh.t), len(incidence))

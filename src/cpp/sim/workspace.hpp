@@ -115,7 +115,6 @@ struct LockedJoints {
   Eigen::MatrixXd mff, z, a;          ///< M_FF = L L^T (L), J_CF L^-T, the reduced A = Z^T Z
   Eigen::VectorXd xl, y, xf, b, guess, pj;
   Eigen::VectorXd x;   ///< M^-1 J^T P of the step it solved (integrateTimeStep reads it)
-  Eigen::VectorXd mx, jx, pfull;  ///< M x, J x, P on the full problem's rows (scratch)
   Eigen::MatrixXd msym;  ///< M, both triangles
   std::shared_ptr<DenseDelassus> delassus;
   std::unique_ptr<ContactProblem> problem;
