@@ -45,3 +45,17 @@ class StepDerivatives:
         """The (2 nv, 2 nv) Jacobian of (q⁺, v⁺) with respect to (q, v), for chaining along a
         trajectory: d x_{k+1} = F d x_k with x = (q in tangent coordinates, v)."""
         return np.block([[self.dq_dq, self.dq_dv], [self.dv_dq, self.dv_dv]])
+
+
+def _from_core(out: dict, contact_names) -> StepDerivatives:
+    """A StepDerivatives from ``_core.step_derivatives``'s dict (read-only arrays)."""
+    def frozen(x):
+        a = np.array(x, dtype=float)
+        a.setflags(write=False)
+        return a
+
+    boundary = np.array(out["boundary"], dtype=bool)
+    boundary.setflags(write=False)
+    return StepDerivatives(
+        **{k: frozen(out[k]) for k in ("dq_dq", "dq_dv", "dq_dtau", "dv_dq", "dv_dv", "dv_dtau", "dq_dmu", "dv_dmu")},
+        modes=tuple(out["modes"]), boundary=boundary, contact_names=tuple(contact_names))
