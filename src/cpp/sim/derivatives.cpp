@@ -24,6 +24,7 @@
 #include <vector>
 
 #include <Eigen/Cholesky>
+#include <Eigen/LU>
 #include <Eigen/QR>
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
@@ -116,36 +117,54 @@ void kinematicsDerivativesAt(const SimulatorModel& sim, PartPasses& passes, cons
     Vec qs, ws;
     gatherQ(part, q0, qs);
     gatherV(part, w, ws);
+    pinocchio::computeJointJacobians(part.model, passes.data[s], qs);  // (data.J for getJointJacobian)
     pinocchio::computeForwardKinematicsDerivatives(part.model, passes.data[s], qs, ws, Vec::Zero(part.model.nv));
   }
 }
 
 // One block of rows whose derivatives with respect to q are computed: a sphere contact on a half-space
-// fixed in the world (rows T (t1, t2, n) of the material point `at` of joint `plus`, the centre
-// `center`; radius r), or an anchor (3 rows, identity T, the material points of plus and minus).
+// (rows T (t1, t2, n) of the relative velocity at the contact point p = centre - r n of the material
+// point `at` of joint `plus` and `at_minus` of the half-space's joint `minus`, 0 for the world; the
+// half-space turns with minus: T and n do), or an anchor (3 rows, identity T, material points).
 struct RowBlock {
   Eigen::Index row = 0;
   int k = 0;
   pinocchio::JointIndex plus = 0, minus = 0;
   Eigen::Vector3d at = Eigen::Vector3d::Zero(), at_minus = Eigen::Vector3d::Zero(), center = Eigen::Vector3d::Zero();
   Eigen::Vector3d n = Eigen::Vector3d::Zero();
+  Eigen::Vector3d plane_origin = Eigen::Vector3d::Zero();  ///< the half-space frame's origin (minus's joint frame)
   double radius = 0.0;
   Eigen::Matrix3d T = Eigen::Matrix3d::Identity();
   bool anchor = false;
 };
 
-// d/dq of the block's rows times the velocity of the last kinematicsDerivativesAt: T (d v_point / dq)
-// for the moving contact point (its body coordinates change with q for a sphere: the correction
-// [omega]x (-r [n]x J_omega)). k x nv.
+// d p / dq of the contact point p = centre - r n (3 x nv): the centre moves with plus, n turns with minus.
+Mat contactPointDq(const SimulatorModel& sim, PartPasses& passes, const RowBlock& b) {
+  Mat dp = pointVelocityJacobian(sim, passes, b.plus, b.center, false);
+  if (b.minus != 0 && b.radius != 0.0) dp += b.radius * skew(b.n) * angularJacobian(sim, passes, b.minus);
+  return dp;
+}
+
+// d/dq of the block's rows times the velocity w of the last kinematicsDerivativesAt (k x nv): the
+// material points' velocity derivatives (Pinocchio's), the contact point's motion over the bodies
+// ([omega]x (dp/dq - J_point) per body) and the frame's turn with minus (d t_i = omega_B x t_i).
 Mat rowVelocityDq(const SimulatorModel& sim, PartPasses& passes, const RowBlock& b, const Vec& w) {
   Mat d = pointVelocityJacobian(sim, passes, b.plus, b.at, true);
-  if (b.anchor && b.minus != 0) d -= pointVelocityJacobian(sim, passes, b.minus, b.at_minus, true);
-  if (!b.anchor && b.radius != 0.0) {
-    const Mat Jw = angularJacobian(sim, passes, b.plus);
-    const Eigen::Vector3d omega = Jw * w;
-    d += skew(omega) * (-b.radius * skew(b.n)) * Jw;
+  if (b.minus != 0) d -= pointVelocityJacobian(sim, passes, b.minus, b.at_minus, true);
+  if (b.anchor) return d;
+  if (b.radius == 0.0 && b.minus == 0) return b.T.topRows(b.k) * d;
+  const Mat dp = contactPointDq(sim, passes, b);
+  const Mat Jp = pointVelocityJacobian(sim, passes, b.plus, b.at, false);
+  d += skew(angularJacobian(sim, passes, b.plus) * w) * (dp - Jp);
+  Mat rows = b.T.topRows(b.k) * d;
+  if (b.minus != 0) {
+    const Mat Jm = pointVelocityJacobian(sim, passes, b.minus, b.at_minus, false);
+    const Mat Jw = angularJacobian(sim, passes, b.minus);
+    rows -= b.T.topRows(b.k) * (skew(Jw * w) * (dp - Jm));
+    const Eigen::Vector3d relative = (Jp - Jm) * w;
+    for (int i = 0; i < b.k; ++i) rows.row(i) += b.T.row(i).cross(relative.transpose()) * Jw;
   }
-  return b.T.topRows(b.k) * d;
+  return rows;
 }
 
 }  // namespace
@@ -243,6 +262,7 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
         dnle_dv(wr, wk) = data.dtau_dv(r, k);
         drnea_dq(wr, wk) = data.dtau_dq(r, k);
       }
+    pinocchio::computeJointJacobians(part.model, data, qs);  // (data.J for getJointJacobian)
     pinocchio::computeForwardKinematicsDerivatives(part.model, data, qs, vs, zero);
   }
 
@@ -344,7 +364,48 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
   rhs.middleCols(nv, nv).noalias() = -Eu * dc_dtau;
   rhs.rightCols(candidates) = -Emu;
   Mat dP = Mat::Zero(m, 2 * nv + candidates);
-  if (m > 0) dP = Eigen::CompleteOrthogonalDecomposition<Mat>(K).solve(rhs);
+  Eigen::CompleteOrthogonalDecomposition<Mat> cod;
+  // Redundant contacts whose mode equations no dP can meet (rhs outside K's range: the pinch's four
+  // sticking pads turned about the box's axis) sit where the step changes mode: every contact in
+  // contact is then flagged, the least-squares dP returned.
+  const auto flag_inconsistent = [&](const Mat& x, const Mat& r) {
+    if (m == 0) return;
+    const Mat residual = K * x - r;
+    // (a column whose right-hand side is rounding, 1e-10 of the largest, is not judged)
+    const double largest = r.colwise().norm().maxCoeff();
+    for (Eigen::Index j = 0; j < r.cols(); ++j)
+      if (residual.col(j).norm() > 1e-6 * (r.col(j).norm() + K.norm() * x.col(j).norm()) &&
+          residual.col(j).norm() > 1e-10 * largest) {
+        for (int i : scratch.out.active)
+          if (out.modes[static_cast<std::size_t>(i)] > 0) out.boundary[static_cast<std::size_t>(i)] = 1;
+        out.inconsistent = true;
+        return;
+      }
+  };
+  if (m > 0) {
+    cod.compute(K);
+    dP = cod.solve(rhs);
+    flag_inconsistent(dP, rhs);
+    // A statically indeterminate set whose velocity is not unique either (a cube's four corners sliding
+    // in different directions as it spins: how the weight is shared among them changes the net
+    // friction): K's kernel moves v^. The minimum-norm branch is returned, the solver's may differ:
+    // the contacts the kernel involves are flagged.
+    if (cod.rank() < m) {
+      const Mat kernel = Eigen::FullPivLU<Mat>(K).kernel();
+      const Mat moved = MinvJt * kernel;
+      const double tol = 1e-8 * MinvJt.norm();
+      for (Eigen::Index z = 0; z < kernel.cols(); ++z) {
+        if (moved.col(z).norm() <= tol * kernel.col(z).norm()) continue;
+        out.indeterminate = true;
+        Eigen::Index row = 0;
+        for (int i : scratch.out.active) {
+          const int k = scratch.out.candidate_rows[i];
+          if (kernel.col(z).segment(row, k).norm() > 1e-8 * kernel.col(z).norm()) out.boundary[static_cast<std::size_t>(i)] = 1;
+          row += k;
+        }
+      }
+    }
+  }
   Mat dvhat(nv, 2 * nv + candidates);
   dvhat.leftCols(nv) = dg_dv;
   dvhat.middleCols(nv, nv) = dg_dtau;
@@ -397,9 +458,6 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
                                         "') are not implemented (sphere and point contacts only)");
       const SphereContact& sc = sim.contacts[i];
       const HalfSpace& hs = sim.halfspaces[sc.halfspace];
-      if (hs.frame != 0)
-        throw DerivativesNotImplemented("step_derivatives: derivatives with respect to q of a contact on a moving "
-                                        "half-space ('" + sc.name + "' on '" + hs.name + "') are not implemented");
       RowBlock b;
       b.row = row;
       b.k = k;
@@ -408,8 +466,14 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
       b.n = scratch.work->plane_normal.col(sc.halfspace);
       b.center = f.placement.act(sc.offset);
       const pinocchio::SE3& oMj = jointPlacement(sim, scratch, b.plus);
-      b.at = oMj.actInv(Eigen::Vector3d(oMj.act(b.center) - sc.radius * b.n));
+      const Eigen::Vector3d point = oMj.act(b.center) - sc.radius * b.n;
+      b.at = oMj.actInv(point);
       b.radius = sc.radius;
+      if (hs.frame != 0) {
+        b.minus = model.frames[hs.frame].parentJoint;
+        b.at_minus = jointPlacement(sim, scratch, b.minus).actInv(point);
+        b.plane_origin = model.frames[hs.frame].placement.translation();
+      }
       int r = 0;
       if (k >= 2) b.T.row(r++) = scratch.work->plane_t1.col(sc.halfspace).transpose();
       if (k == 3) b.T.row(r++) = scratch.work->plane_t2.col(sc.halfspace).transpose();
@@ -442,9 +506,38 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
       if (b.minus != 0) acc -= pointAccelerationDv(sim, passes, b.minus, b.at_minus, true);
       U_q.middleRows(b.row, 3) += h * acc + J.middleRows(b.row, 3) / h;  // Psi = p1 - p2: dPsi/dq = J
     } else {
+      // gap = n . (centre - plane origin) - offset - r; drift = n . (acc_plus(centre) - acc_minus(p))
       const Mat Jc = pointVelocityJacobian(sim, passes, b.plus, b.center, false);
-      U_q.row(rn) += h * b.n.transpose() * pointAccelerationDv(sim, passes, b.plus, b.center, true) +
-                     b.n.transpose() * Jc / h;  // gap = n . centre - offset - r
+      Mat dacc = pointAccelerationDv(sim, passes, b.plus, b.center, true);
+      Mat dgap = Jc;
+      if (b.minus != 0) {
+        const pinocchio::SE3& oMm = jointPlacement(sim, scratch, b.minus);
+        const Mat Jw = angularJacobian(sim, passes, b.minus);
+        dgap -= pointVelocityJacobian(sim, passes, b.minus, b.plane_origin, false);
+        const Eigen::Vector3d center_w = jointPlacement(sim, scratch, b.plus).act(b.center);
+        // the minus body's acceleration field at p, and p's motion over it
+        const pinocchio::Data& data = passes.data[static_cast<std::size_t>(sim.joint_system[b.minus])];
+        const pinocchio::JointIndex local = sim.joint_local[b.minus];
+        const Eigen::Vector3d omega = data.ov[local].angular(), alpha = data.oa[local].angular();
+        const Eigen::Vector3d p = oMm.act(b.at_minus);
+        const Eigen::Vector3d acc_minus = data.oa[local].linear() + alpha.cross(p) +
+                                          omega.cross(Eigen::Vector3d(data.ov[local].linear() + omega.cross(p)));
+        const Eigen::Vector3d acc_plus = [&] {
+          const pinocchio::Data& dp = passes.data[static_cast<std::size_t>(sim.joint_system[b.plus])];
+          const pinocchio::JointIndex lp = sim.joint_local[b.plus];
+          const Eigen::Vector3d wp = dp.ov[lp].angular(), c = center_w;
+          return Eigen::Vector3d(dp.oa[lp].linear() + dp.oa[lp].angular().cross(c) +
+                                 wp.cross(Eigen::Vector3d(dp.ov[lp].linear() + wp.cross(c))));
+        }();
+        const Mat dp = contactPointDq(sim, passes, b);
+        const Mat Jm = pointVelocityJacobian(sim, passes, b.minus, b.at_minus, false);
+        dacc -= pointAccelerationDv(sim, passes, b.minus, b.at_minus, true) +
+                (skew(alpha) + skew(omega) * skew(omega)) * (dp - Jm);
+        // n turns with minus: d n = omega_B(dq) x n
+        U_q.row(rn) += h * b.n.cross(acc_plus - acc_minus).transpose() * Jw;
+        U_q.row(rn) += b.n.cross(Eigen::Vector3d(center_w - oMm.act(b.plane_origin))).transpose() * Jw / h;
+      }
+      U_q.row(rn) += h * b.n.transpose() * dacc + b.n.transpose() * dgap / h;
     }
   }
   // (dJ/dq) v^ on every row, - h (dJ/dq) ft on the normal rows: the velocity derivatives at v^, v^ - h ft
@@ -452,11 +545,6 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
   for (int pass = 0; pass < 2; ++pass) {
     const Vec& w = pass == 0 ? v_hat : v_normal;
     kinematicsDerivativesAt(sim, passes, q0, w);
-    for (std::size_t s = 0; s < sim.systems.size(); ++s) {
-      Vec qs;
-      gatherQ(sim.systems[s], q0, qs);
-      pinocchio::computeJointJacobians(sim.systems[s].model, passes.data[s], qs);
-    }
     for (const RowBlock& b : blocks) {
       const Mat d = rowVelocityDq(sim, passes, b, w);
       for (int r = 0; r < b.k; ++r) {
@@ -472,11 +560,6 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
       Vec e = Vec::Zero(nv);
       e[k] = 1.0;
       kinematicsDerivativesAt(sim, passes, q0, e);
-      for (std::size_t s = 0; s < sim.systems.size(); ++s) {
-        Vec qs;
-        gatherQ(sim.systems[s], q0, qs);
-        pinocchio::computeJointJacobians(sim.systems[s].model, passes.data[s], qs);
-      }
       for (const RowBlock& b : blocks) JtP_q.row(k) += P.segment(b.row, b.k).transpose() * rowVelocityDq(sim, passes, b, e);
     }
   // tau's q_target (-) q (kp), where not clamped
@@ -489,7 +572,12 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
   Mat dg_dq = llt.solve(Mat(h * dtau_dq - h * drnea_dq + JtP_q));
   const Mat dc_dq = J * dg_dq + U_q;
   Mat dvhat_dq = dg_dq;
-  if (m > 0) dvhat_dq.noalias() += MinvJt * Eigen::CompleteOrthogonalDecomposition<Mat>(K).solve(Mat(-Eu * dc_dq));
+  if (m > 0) {
+    const Mat rhs_q = -Eu * dc_dq;
+    const Mat dP_q = cod.solve(rhs_q);
+    flag_inconsistent(dP_q, rhs_q);
+    dvhat_dq.noalias() += MinvJt * dP_q;
+  }
   // q+ = q (+) h v^: the direct part (dIntegrate's first argument; free flyers: p + h R v_lin, R exp(h omega))
   Mat Q0 = Mat::Zero(nv, nv);
   pinocchio::dIntegrate(model, q0, Vec(h * v_hat), Q0, pinocchio::ARG0);

@@ -26,6 +26,12 @@ struct StepDerivativesOutput {
   /// Per candidate: -1 not in the problem, 0 open, 1 stick, 2 slide (the mode differentiated).
   std::vector<int> modes;
   std::vector<char> boundary;  ///< per candidate: on a mode boundary (a one-sided derivative)
+  /// The modes' equations had no exact solution (redundant contacts at a change of mode): every
+  /// contact in contact flagged in `boundary`, the least-squares answer returned.
+  bool inconsistent = false;
+  /// The step's velocity is not unique (a statically indeterminate set whose sharing of the load moves
+  /// v+): the minimum-norm branch returned, the contacts involved flagged in `boundary`.
+  bool indeterminate = false;
   Eigen::VectorXd q_next, v_next;  ///< the step's result from the current state (the scratch step's)
 };
 
