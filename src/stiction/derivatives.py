@@ -26,7 +26,9 @@ class StepDerivatives:
     "open", "stick" or "slide" (the converged impulse's mode the derivative was taken in).
     ``boundary``: per candidate contact, True where the contact sat on a mode boundary (λ_n = 0
     with u_n = 0, or a sticking impulse on the cone's edge), where the derivative is one-sided:
-    the one of the mode in ``modes``. ``contact_names``: the μ columns' contacts.
+    the one of the mode in ``modes`` (also set where the modes' equations have no exact solution or
+    the step's velocity is not unique: docs/simulator.md, "Derivatives of a step").
+    ``contact_names``: the μ columns' contacts.
     """
 
     dq_dq: np.ndarray

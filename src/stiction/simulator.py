@@ -404,9 +404,8 @@ class Simulator:
         which, and where the derivative is one-sided (docs/simulator.md, "Derivatives of a step").
 
         ``wrt_q=False`` skips the derivatives with respect to q (``dq_dq``, ``dv_dq`` are then NaN):
-        they are implemented for sphere and point contacts on half-spaces fixed in the world and
-        for anchors, and raise NotImplementedError for a coal pair's contact or a half-space on a
-        moving body. Raises ValueError in the ODE modes or another formulation than exact, and
+        they are implemented for sphere and point contacts on half-spaces (fixed or on a body) and
+        for anchors, and raise NotImplementedError for a coal pair's contact. Raises ValueError in the ODE modes or another formulation than exact, and
         NotImplementedError for a step with joint rows (limits, joint friction, effort limits)."""
         from .derivatives import _from_core  # noqa: PLC0415
 
