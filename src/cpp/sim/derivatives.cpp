@@ -553,15 +553,87 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
       }
     }
   }
-  // d(J^T P)/dq: column by column of J^T's argument, (J^T P)_k = P . (J e_k), so row k of the derivative
-  // is P^T d(J e_k)/dq: the velocity derivatives at the unit velocities
-  if (m > 0)
-    for (int k = 0; k < nv; ++k) {
-      Vec e = Vec::Zero(nv);
-      e[k] = 1.0;
-      kinematicsDerivativesAt(sim, passes, q0, e);
-      for (const RowBlock& b : blocks) JtP_q.row(k) += P.segment(b.row, b.k).transpose() * rowVelocityDq(sim, passes, b, e);
+  // d(J^T P)/dq. Each block's impulse is a world force f = T^T P_c at p on plus (and -f on minus), i.e.
+  // the world wrench phi = (f, p x f), and J^T P = sum over bodies J_local^T f_local, f_local = oMi^-1 * phi:
+  //  (1) J_local's variation at fixed f_local: rnea's with f_local as external forces, minus its own;
+  //  (2) f_local's at fixed phi (oMi -> oMi exp(nu), nu = J_local dq): -J_local^T F(f_local) J_local,
+  //      F(f) nu = nu x* f;
+  //  (3) the point's motion dp: phi gains (0, dp x f): -J_omega^T [f]x dp;
+  //  (4) the frame's turn with minus (f = T^T P_c turns: df = omega_B x f): (J_p - J_m)^T (-[f]x J_omega,B).
+  if (m > 0) {
+    struct Load {  // one force on one body at one world point that moves by dp/dq
+      pinocchio::JointIndex joint;
+      Eigen::Vector3d f, p;
+      Mat dp;
+    };
+    std::vector<Load> loads;
+    for (const RowBlock& b : blocks) {
+      const Eigen::Vector3d f = b.T.topRows(b.k).transpose() * P.segment(b.row, b.k);
+      if (b.anchor) {
+        const Eigen::Vector3d p1 = jointPlacement(sim, scratch, b.plus).act(b.at);
+        loads.push_back({b.plus, f, p1, pointVelocityJacobian(sim, passes, b.plus, b.at, false)});
+        if (b.minus != 0) {
+          const Eigen::Vector3d p2 = jointPlacement(sim, scratch, b.minus).act(b.at_minus);
+          loads.push_back({b.minus, Eigen::Vector3d(-f), p2, pointVelocityJacobian(sim, passes, b.minus, b.at_minus, false)});
+        }
+        continue;
+      }
+      const Eigen::Vector3d p = jointPlacement(sim, scratch, b.plus).act(b.at);
+      const Mat dp = contactPointDq(sim, passes, b);
+      loads.push_back({b.plus, f, p, dp});
+      if (b.minus != 0) {
+        loads.push_back({b.minus, Eigen::Vector3d(-f), p, dp});
+        const Mat Jw = angularJacobian(sim, passes, b.minus);
+        const Mat relative = pointVelocityJacobian(sim, passes, b.plus, b.at, false) -
+                             pointVelocityJacobian(sim, passes, b.minus, b.at_minus, false);
+        JtP_q.noalias() -= relative.transpose() * skew(f) * Jw;  // (4)
+      }
     }
+    for (std::size_t s = 0; s < sim.systems.size(); ++s) {
+      const SystemModel& part = sim.systems[s];
+      const pinocchio::Model& pm = part.model;
+      pinocchio::container::aligned_vector<pinocchio::Force> fext(static_cast<std::size_t>(pm.njoints), pinocchio::Force::Zero());
+      bool any = false;
+      for (const Load& l : loads) {
+        if (l.joint == 0 || sim.joint_system[l.joint] != static_cast<int>(s)) continue;
+        const pinocchio::JointIndex local = sim.joint_local[l.joint];
+        const pinocchio::Force phi(l.f, Eigen::Vector3d(l.p.cross(l.f)));
+        fext[local] += passes.data[s].oMi[local].actInv(phi);
+        any = true;
+        // (3)
+        const Mat Jw = angularJacobian(sim, passes, l.joint);
+        JtP_q.noalias() -= Jw.transpose() * skew(l.f) * l.dp;
+      }
+      if (!any) continue;
+      // (2), per joint carrying a force
+      for (pinocchio::JointIndex local = 1; local < static_cast<pinocchio::JointIndex>(pm.njoints); ++local) {
+        if (fext[local].toVector().isZero(0.0)) continue;
+        Mat Jl = Mat::Zero(6, pm.nv);
+        pinocchio::getJointJacobian(pm, passes.data[s], local, pinocchio::LOCAL, Jl);
+        const Eigen::Vector3d fl = fext[local].linear(), fa = fext[local].angular();
+        Eigen::Matrix<double, 6, 6> F = Eigen::Matrix<double, 6, 6>::Zero();
+        F.block<3, 3>(0, 3) = -skew(fl);
+        F.block<3, 3>(3, 0) = -skew(fl);
+        F.block<3, 3>(3, 3) = -skew(fa);
+        const Mat term = -Jl.transpose() * F * Jl;
+        for (Eigen::Index r = 0; r < pm.nv; ++r)
+          for (Eigen::Index k = 0; k < pm.nv; ++k)
+            JtP_q(part.v_index[static_cast<std::size_t>(r)], part.v_index[static_cast<std::size_t>(k)]) += term(r, k);
+      }
+      // (1): rnea with and without the forces, same (q, v, a)
+      pinocchio::Data with_forces(pm);
+      Vec qs, vs, as;
+      gatherQ(part, q0, qs);
+      gatherV(part, v0, vs);
+      gatherV(part, accel, as);
+      pinocchio::computeRNEADerivatives(pm, with_forces, qs, vs, as, fext);
+      for (Eigen::Index r = 0; r < pm.nv; ++r)
+        for (Eigen::Index k = 0; k < pm.nv; ++k) {
+          const int wr = part.v_index[static_cast<std::size_t>(r)], wk = part.v_index[static_cast<std::size_t>(k)];
+          JtP_q(wr, wk) += drnea_dq(wr, wk) - with_forces.dtau_dq(r, k);
+        }
+    }
+  }
   // tau's q_target (-) q (kp), where not clamped
   Mat dtau_dq = Mat::Zero(nv, nv);
   if (!sd.control.kp.isZero(0.0)) {
