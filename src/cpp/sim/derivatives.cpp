@@ -244,12 +244,26 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
 
   // Pinocchio's derivative passes per part at (q0, v0): rnea's at the step's acceleration (d nle / dv,
   // and d (M a + nle) / dq), and the kinematics' at a = 0 for the drift's d (J' v) / d(q, v).
-  PartPasses passes;
-  passes.data.reserve(sim.systems.size());
+  // (kept in the scratch data's workspace: a Data's construction, its kinematic Hessians zeroed, cost
+  // more than the passes)
+  const auto fits = [&](const PartPasses& p) {
+    if (p.data.size() != sim.systems.size()) return false;
+    for (std::size_t s = 0; s < p.data.size(); ++s)
+      if (p.data[s].oMi.size() != static_cast<std::size_t>(sim.systems[s].model.njoints) ||
+          p.data[s].dtau_dq.cols() != sim.systems[s].model.nv)
+        return false;
+    return true;
+  };
+  if (!scratch.work->derivatives || !fits(*std::static_pointer_cast<PartPasses>(scratch.work->derivatives))) {
+    auto made = std::make_shared<PartPasses>();
+    for (const SystemModel& part : sim.systems) made->data.emplace_back(part.model);
+    scratch.work->derivatives = made;
+  }
+  PartPasses& passes = *std::static_pointer_cast<PartPasses>(scratch.work->derivatives);
   Mat dnle_dv = Mat::Zero(nv, nv), drnea_dq = Mat::Zero(nv, nv);
-  for (const SystemModel& part : sim.systems) {
-    passes.data.emplace_back(part.model);
-    pinocchio::Data& data = passes.data.back();
+  for (std::size_t s = 0; s < sim.systems.size(); ++s) {
+    const SystemModel& part = sim.systems[s];
+    pinocchio::Data& data = passes.data[s];
     Vec qs, vs, as;
     gatherQ(part, q0, qs);
     gatherV(part, v0, vs);
@@ -620,8 +634,8 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
           for (Eigen::Index k = 0; k < pm.nv; ++k)
             JtP_q(part.v_index[static_cast<std::size_t>(r)], part.v_index[static_cast<std::size_t>(k)]) += term(r, k);
       }
-      // (1): rnea with and without the forces, same (q, v, a)
-      pinocchio::Data with_forces(pm);
+      // (1): rnea with and without the forces, same (q, v, a) (the last use of this part's Data)
+      pinocchio::Data& with_forces = passes.data[s];
       Vec qs, vs, as;
       gatherQ(part, q0, qs);
       gatherV(part, v0, vs);
