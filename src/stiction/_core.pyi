@@ -578,3 +578,6 @@ def solver_names() -> list:
 
 def step(sim: SimulatorModel, data: SimulatorData) -> None:
     """advance one step"""
+
+def step_derivatives(sim: SimulatorModel, data: SimulatorData, scratch: Any, wrt_q: bool = ...) -> dict:
+    """the analytic Jacobians of one time step from data's state (issue 26; the step is run on scratch, another SimulatorData of sim, data is not changed; wrt_q=False: dq_dq, dv_dq left NaN): a dict read by stiction.derivatives.StepDerivatives"""

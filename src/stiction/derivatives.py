@@ -27,7 +27,9 @@ class StepDerivatives:
     "open", "stick" or "slide" (the converged impulse's mode the derivative was taken in).
     ``boundary``: per candidate contact, True where the contact sat on a mode boundary (λ_n = 0
     with u_n = 0, or a sticking impulse on the cone's edge), where the derivative is one-sided:
-    the one of the mode in ``modes``. ``contact_names``: the μ columns' contacts.
+    the one of the mode in ``modes`` (also set where the modes' equations have no exact solution or
+    the step's velocity is not unique: docs/simulator.md, "Derivatives of a step").
+    ``contact_names``: the μ columns' contacts.
     """
 
     dq_dq: np.ndarray
@@ -379,3 +381,17 @@ def finite_difference_step_jvp(sim, dq, dv, dtau=None, eps: float = 1e-6, *,
     q_plus0 = stepper.step(q0, v0, tau0)[0]
     dq_plus = (pin.difference(model, q_plus0, plus[0]) - pin.difference(model, q_plus0, minus[0])) / (2 * step)
     return dq_plus, (plus[1] - minus[1]) / (2 * step)
+
+
+def _from_core(out: dict, contact_names) -> StepDerivatives:
+    """A StepDerivatives from ``_core.step_derivatives``'s dict (read-only arrays)."""
+    def frozen(x):
+        a = np.array(x, dtype=float)
+        a.setflags(write=False)
+        return a
+
+    boundary = np.array(out["boundary"], dtype=bool)
+    boundary.setflags(write=False)
+    return StepDerivatives(
+        **{k: frozen(out[k]) for k in ("dq_dq", "dq_dv", "dq_dtau", "dv_dq", "dv_dv", "dv_dtau", "dq_dmu", "dv_dmu")},
+        modes=tuple(out["modes"]), boundary=boundary, contact_names=tuple(contact_names))

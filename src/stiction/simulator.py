@@ -7,7 +7,7 @@ import math
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 import pinocchio as pin
@@ -21,6 +21,9 @@ from .formulations import PARAMETERS as FORMULATION_PARAMETERS
 from .formulations import check_name as check_formulation
 from .formulations import settings_for as formulation_settings
 from .scene_schema import did_you_mean
+
+if TYPE_CHECKING:
+    from .derivatives import StepDerivatives
 
 _VECTOR_KEYS = ("t", "residual", "iterations", "converged", "dt")
 
@@ -427,6 +430,26 @@ class Simulator:
         if self._controller_loop is not None:
             self._controller_loop(self)
         _core.step(self.model, self._data)
+
+    def step_derivatives(self, wrt_q: bool = True) -> "StepDerivatives":
+        """The analytic Jacobians of one time step from the current state (issue 26; eq. 70, exact
+        formulation): a :class:`stiction.derivatives.StepDerivatives`. The step is run on a scratch
+        data of this simulator: ``sim.data`` (state, control, outputs) is not changed, and the
+        scene's controller is not run (the control in ``sim.data`` is the step's). The implicit
+        function theorem at the converged impulse, contact by contact in its mode (open: λ = 0;
+        stick: u = 0; slide: u_n = 0 and λ_t = -μ λ_n u_t / ‖u_t‖); ``modes`` and ``boundary`` say
+        which, and where the derivative is one-sided (docs/simulator.md, "Derivatives of a step").
+
+        ``wrt_q=False`` skips the derivatives with respect to q (``dq_dq``, ``dv_dq`` are then NaN):
+        they are implemented for sphere and point contacts on half-spaces (fixed or on a body) and
+        for anchors, and raise NotImplementedError for a coal pair's contact. Raises ValueError in the ODE modes or another formulation than exact, and
+        NotImplementedError for a step with joint rows (limits, joint friction, effort limits)."""
+        from .derivatives import _from_core  # noqa: PLC0415
+
+        if getattr(self, "_derivative_data", None) is None:
+            self._derivative_data = _core.SimulatorData(self.model)
+        out = _core.step_derivatives(self.model, self._data, self._derivative_data, bool(wrt_q))
+        return _from_core(out, self.contact_names)
 
     def _record_bytes(self, steps: int, record_every: int) -> int:
         """Bytes of the trajectory a rollout of `steps` steps recording every `record_every`-th makes."""

@@ -13,6 +13,7 @@
 #include "stiction/rk4_stability.hpp"
 #include "stiction/rollout.hpp"
 #include "stiction/simulator.hpp"
+#include "stiction/step_derivatives.hpp"
 
 namespace bp = boost::python;
 
@@ -352,6 +353,40 @@ bp::object numpyArray(const double* data, Eigen::Index rows, Eigen::Index cols) 
   const bp::object array = frombuffer(buffer, "float64");
   return cols < 0 ? array : array.attr("reshape")(rows, cols);
 }
+
+/// step_derivatives(sim, data, scratch): the analytic derivatives of the step from data's state, the
+/// step run on scratch (stiction.derivatives.StepDerivatives reads the dict).
+bp::dict stepDerivativesPy(const bp::object& sim_, const bp::object& data_, const bp::object& scratch_, bool wrt_q) {
+  const SimulatorModel& sim = simArg(sim_, "step_derivatives");
+  const SimulatorData& data = dataArg(data_, "step_derivatives");
+  SimulatorData& scratch = dataArg(scratch_, "step_derivatives (scratch)");
+  if (&scratch == &data) throw std::invalid_argument("step_derivatives: scratch must be another SimulatorData than data");
+  StepDerivativesOutput d;
+  stepDerivatives(sim, data, scratch, d, wrt_q);
+  bp::dict out;
+  out["dq_dq"] = d.dq_dq;
+  out["dq_dv"] = d.dq_dv;
+  out["dq_dtau"] = d.dq_dtau;
+  out["dv_dq"] = d.dv_dq;
+  out["dv_dv"] = d.dv_dv;
+  out["dv_dtau"] = d.dv_dtau;
+  out["dq_dmu"] = d.dq_dmu;
+  out["dv_dmu"] = d.dv_dmu;
+  out["has_q"] = d.has_q;
+  out["q_next"] = d.q_next;
+  out["v_next"] = d.v_next;
+  bp::list modes, boundary;
+  static const char* const kModes[] = {"none", "open", "stick", "slide"};
+  for (std::size_t i = 0; i < d.modes.size(); ++i) {
+    modes.append(kModes[d.modes[i] + 1]);
+    boundary.append(static_cast<bool>(d.boundary[i]));
+  }
+  out["modes"] = bp::tuple(modes);
+  out["boundary"] = bp::tuple(boundary);
+  return out;
+}
+
+void translateNotImplemented(const DerivativesNotImplemented& e) { PyErr_SetString(PyExc_NotImplementedError, e.what()); }
 
 bp::dict recordingDict(const Recording& rec) {
   const int n = rec.records;  // the rows filled
@@ -729,6 +764,10 @@ void exposeSimulator() {
            bp::arg("implicit_pd_step") = 0.0),
           "fill data.J, A, b (eq. 27), drift, position_error and active at (q, v); implicit_pd_step = h > 0: the "
           "joint PD implicit over h, as a time step builds it (M's diagonal, the actuators' effort rows)");
+  bp::register_exception_translator<DerivativesNotImplemented>(&translateNotImplemented);
+  bp::def("step_derivatives", &stepDerivativesPy, (bp::arg("sim"), bp::arg("data"), bp::arg("scratch"), bp::arg("wrt_q") = true),
+          "the analytic Jacobians of one time step from data's state (issue 26; the step is run on scratch, "
+          "another SimulatorData of sim, data is not changed; wrt_q=False: dq_dq, dv_dq left NaN): a dict read by stiction.derivatives.StepDerivatives");
   bp::def("rollout", &rollout,
           (bp::arg("sim"), bp::arg("data"), bp::arg("n_steps"), bp::arg("record_every") = 1,
            bp::arg("initial_contacts") = true, bp::arg("before_step") = bp::object()),

@@ -210,6 +210,10 @@ struct SimulatorWorkspace {
   Eigen::VectorXd nv_scratch;   ///< one value per velocity coordinate
 
   LockedJoints locked;  ///< the joints' dry friction holding: the reduced problem (locked_joints.cpp)
+
+  /// step_derivatives' own workspace (derivatives.cpp: a Pinocchio Data per part for the derivative
+  /// passes), made at the first call on this data.
+  std::shared_ptr<void> derivatives;
 };
 
 }  // namespace stiction
