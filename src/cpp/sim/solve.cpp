@@ -3,6 +3,7 @@
 // from the previous step; then per-candidate forces and states. Eigen and the solver core only.
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -65,6 +66,17 @@ std::string unsolvableMessage(const SimulatorModel& sim, const SimulatorData& sd
   return os.str();
 }
 
+// Islands on unless STICTION_ISLANDS=0 (read at each call: cheap, and A/B runs flip it in one process).
+bool islandsEnabled() {
+  const char* v = std::getenv("STICTION_ISLANDS");
+  return v == nullptr || std::string(v) != "0";
+}
+
+bool keepBoundaryGuess() {  // (experiment)
+  const char* v = std::getenv("STICTION_KEEP_BOUNDARY");
+  return v != nullptr && std::string(v) == "1";
+}
+
 }  // namespace
 
 void setStepProblem(const SimulatorModel& sim, SimulatorData& sd, double scale) {
@@ -103,6 +115,7 @@ void setStepProblem(const SimulatorModel& sim, SimulatorData& sd, double scale) 
     sd.work->sparse_delassus = std::make_shared<SparseDelassus>(sd.out.A_sparse, /*symmetric=*/true);
     sd.work->operator_pattern_version = sd.work->pattern_version;
     sd.work->problem = std::make_unique<ContactProblem>(sd.work->sparse_delassus, scale * sd.out.b, constraints(), 1e-6, false);
+    ++sd.work->problem_version;
     sd.work->problem_active = sd.out.active;
     sd.work->problem_joint_rows = sd.out.joint_rows;
     sd.work->problem_scale = scale;
@@ -110,6 +123,7 @@ void setStepProblem(const SimulatorModel& sim, SimulatorData& sd, double scale) 
     sd.work->sparse_delassus.reset();
     sd.work->delassus = std::make_shared<DenseDelassus>(sd.out.A);
     sd.work->problem = std::make_unique<ContactProblem>(sd.work->delassus, scale * sd.out.b, constraints(), 1e-6, false);
+    ++sd.work->problem_version;
     sd.work->problem_active = sd.out.active;
     sd.work->problem_joint_rows = sd.out.joint_rows;
     sd.work->problem_scale = scale;
@@ -136,7 +150,7 @@ bool stepGuess(const SimulatorModel& sim, SimulatorData& sd, double scale, bool 
       // solver's sticking step applies (docs/solvers.md); the part of the friction the body needs is
       // in A's range and comes back with the first step.
       // (The exact law's cone only: the other formulations keep their guess as it was.)
-      if (exact && k > 1 && sd.out.candidate_states[i] == ContactState::kStick) {
+      if (exact && k > 1 && sd.out.candidate_states[i] == ContactState::kStick && !keepBoundaryGuess()) {
         const auto tangent = sd.work->guess.segment(row, k - 1);
         if (tangent.norm() >= (1.0 - kBoundaryMargin) * candidateMu(sim, i) * sd.work->guess[row + k - 1])
           sd.work->guess.segment(row, k - 1).setZero();
@@ -249,7 +263,17 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     context.state = &sd.work->spring_rows;
     setFormulationContext(*sd.work->solver, context);
   }
-  solve(*sd.work->problem, *sd.work->solver, settings, sd.out.result, &sd.work->guess);
+  // Independent islands (bodies resting apart share no row of A) solved one by one, the whole
+  // problem judged at their answer (islands.hpp); else, or where that misses, the whole problem.
+  // (STICTION_ISLANDS=0: the whole problem only, for A/B timing.)
+  bool by_islands = false;
+  if (exact && sd.out.sparse && islandsEnabled()) {
+    if (!sd.work->islands) sd.work->islands = std::make_unique<IslandSolver>(sim.settings.solver);
+    by_islands = sd.work->islands->solve(*sd.work->problem, settings, sd.out.result,
+                                         settings.warm_start == WarmStart::kGiven ? &sd.work->guess : nullptr,
+                                         sd.work->problem_version);
+  }
+  if (!by_islands) solve(*sd.work->problem, *sd.work->solver, settings, sd.out.result, &sd.work->guess);
   int solve_iterations = sd.out.result.iterations;
   // A retry's verdict replaces the first when it converged, or missed by less.
   const auto better = [&](const SolverResult& retry) {
