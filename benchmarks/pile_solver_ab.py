@@ -51,7 +51,8 @@ def main():
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--scene", default="pile-24")
-    ap.add_argument("--variants", default="", help="comma-separated env STICTION_PILE_VARIANT values (A/B in one build)")
+    ap.add_argument("--variants", default="", help="'|'-separated variants, each space-separated ENV=VALUE settings "
+                    "(A/B in one build), e.g. 'STICTION_ISLANDS=0|STICTION_ISLANDS=1'")
     args = ap.parse_args()
     import mujoco
 
@@ -59,14 +60,15 @@ def main():
     from stiction.simulator import Simulator
 
     scene = load_scene(args.scene)
-    mjm = pile_twin(scene)
-    variants = args.variants.split(",") if args.variants else [""]
+    mjm = pile_twin(scene) if scene.geometry is not None else None  # (no twin for a scene without coal pairs)
+    variants = args.variants.split("|") if args.variants else [""]
     rows = {v: [] for v in variants}
     rows["mujoco"] = []
     print("load", os.getloadavg())
     for rep in range(args.reps):
         for v in variants:
-            os.environ["STICTION_ISLANDS"] = v
+            env = dict(kv.split("=", 1) for kv in v.split())
+            os.environ.update(env)
             sim = Simulator(args.scene)
             t0 = time.perf_counter()
             traj = sim.rollout(args.steps * sim.dt)
@@ -74,6 +76,10 @@ def main():
             step, solve = traj.timings[1:, 4], traj.timings[1:, 2]
             rows[v].append((np.median(step), np.mean(step), wall, bool(traj.converged[1:].all()),
                             np.median(solve), np.mean(solve)))
+            for k in env:
+                del os.environ[k]
+        if mjm is None:
+            continue
         d = mujoco.MjData(mjm)
         per = []
         t0 = time.perf_counter()
@@ -85,8 +91,10 @@ def main():
         rows["mujoco"].append((np.median(per) * 1e6, np.mean(per) * 1e6, wall, True, 0.0, 0.0))
     print("load", os.getloadavg())
     for k, r in rows.items():
+        if not r:
+            continue
         r = np.array(r, dtype=float)
-        print(f"{k or 'default':>10}: median {np.median(r[:, 0]):7.1f} us  mean {np.median(r[:, 1]):7.1f} us  "
+        print(f"{k or 'default':>50}: median {np.median(r[:, 0]):7.1f} us  mean {np.median(r[:, 1]):7.1f} us  "
               f"wall {np.median(r[:, 2]):7.1f} us  solve median {np.median(r[:, 4]):6.1f} mean {np.median(r[:, 5]):6.1f}  "
               f"converged {bool(r[:, 3].all())}")
 

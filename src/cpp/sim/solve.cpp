@@ -72,11 +72,6 @@ bool islandsEnabled() {
   return v == nullptr || std::string(v) != "0";
 }
 
-bool keepBoundaryGuess() {  // (experiment)
-  const char* v = std::getenv("STICTION_KEEP_BOUNDARY");
-  return v != nullptr && std::string(v) == "1";
-}
-
 }  // namespace
 
 void setStepProblem(const SimulatorModel& sim, SimulatorData& sd, double scale) {
@@ -150,7 +145,7 @@ bool stepGuess(const SimulatorModel& sim, SimulatorData& sd, double scale, bool 
       // solver's sticking step applies (docs/solvers.md); the part of the friction the body needs is
       // in A's range and comes back with the first step.
       // (The exact law's cone only: the other formulations keep their guess as it was.)
-      if (exact && k > 1 && sd.out.candidate_states[i] == ContactState::kStick && !keepBoundaryGuess()) {
+      if (exact && k > 1 && sd.out.candidate_states[i] == ContactState::kStick) {
         const auto tangent = sd.work->guess.segment(row, k - 1);
         if (tangent.norm() >= (1.0 - kBoundaryMargin) * candidateMu(sim, i) * sd.work->guess[row + k - 1])
           sd.work->guess.segment(row, k - 1).setZero();
