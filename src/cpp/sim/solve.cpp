@@ -3,6 +3,7 @@
 // from the previous step; then per-candidate forces and states. Eigen and the solver core only.
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -65,6 +66,12 @@ std::string unsolvableMessage(const SimulatorModel& sim, const SimulatorData& sd
   return os.str();
 }
 
+// Islands on unless STICTION_ISLANDS=0 (read at each call: cheap, and A/B runs flip it in one process).
+bool islandsEnabled() {
+  const char* v = std::getenv("STICTION_ISLANDS");
+  return v == nullptr || std::string(v) != "0";
+}
+
 }  // namespace
 
 void setStepProblem(const SimulatorModel& sim, SimulatorData& sd, double scale) {
@@ -103,6 +110,7 @@ void setStepProblem(const SimulatorModel& sim, SimulatorData& sd, double scale) 
     sd.work->sparse_delassus = std::make_shared<SparseDelassus>(sd.out.A_sparse, /*symmetric=*/true);
     sd.work->operator_pattern_version = sd.work->pattern_version;
     sd.work->problem = std::make_unique<ContactProblem>(sd.work->sparse_delassus, scale * sd.out.b, constraints(), 1e-6, false);
+    ++sd.work->problem_version;
     sd.work->problem_active = sd.out.active;
     sd.work->problem_joint_rows = sd.out.joint_rows;
     sd.work->problem_scale = scale;
@@ -110,6 +118,7 @@ void setStepProblem(const SimulatorModel& sim, SimulatorData& sd, double scale) 
     sd.work->sparse_delassus.reset();
     sd.work->delassus = std::make_shared<DenseDelassus>(sd.out.A);
     sd.work->problem = std::make_unique<ContactProblem>(sd.work->delassus, scale * sd.out.b, constraints(), 1e-6, false);
+    ++sd.work->problem_version;
     sd.work->problem_active = sd.out.active;
     sd.work->problem_joint_rows = sd.out.joint_rows;
     sd.work->problem_scale = scale;
@@ -249,7 +258,17 @@ void solveContacts(const SimulatorModel& sim, SimulatorData& sd, double scale) {
     context.state = &sd.work->spring_rows;
     setFormulationContext(*sd.work->solver, context);
   }
-  solve(*sd.work->problem, *sd.work->solver, settings, sd.out.result, &sd.work->guess);
+  // Independent islands (bodies resting apart share no row of A) solved one by one, the whole
+  // problem judged at their answer (islands.hpp); else, or where that misses, the whole problem.
+  // (STICTION_ISLANDS=0: the whole problem only, for A/B timing.)
+  bool by_islands = false;
+  if (exact && sd.out.sparse && islandsEnabled()) {
+    if (!sd.work->islands) sd.work->islands = std::make_unique<IslandSolver>(sim.settings.solver);
+    by_islands = sd.work->islands->solve(*sd.work->problem, settings, sd.out.result,
+                                         settings.warm_start == WarmStart::kGiven ? &sd.work->guess : nullptr,
+                                         sd.work->problem_version);
+  }
+  if (!by_islands) solve(*sd.work->problem, *sd.work->solver, settings, sd.out.result, &sd.work->guess);
   int solve_iterations = sd.out.result.iterations;
   // A retry's verdict replaces the first when it converged, or missed by less.
   const auto better = [&](const SolverResult& retry) {

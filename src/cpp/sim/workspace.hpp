@@ -18,6 +18,7 @@
 #include "stiction/contact_problem.hpp"
 #include "stiction/delassus.hpp"
 #include "stiction/formulation.hpp"
+#include "stiction/islands.hpp"
 #include "stiction/simulator.hpp"
 #include "stiction/solver.hpp"
 
@@ -182,6 +183,8 @@ struct SimulatorWorkspace {
   double problem_scale = 0.0;
   std::unique_ptr<ContactSolver> solver;
   SolverResult cold_result;     ///< the retry from zero after a warm-started solve missed
+  std::unique_ptr<IslandSolver> islands;
+  long problem_version = 0;  ///< changes with every new `problem` (its blocks or A's pattern): the islands' key  ///< the exact law's problem split into independent islands (islands.hpp)
   Eigen::VectorXd guess, b_scaled;
   Eigen::VectorXd spring_rows;  ///< penalty: the springs per row of the last problem (the formulation's state)
 

@@ -85,4 +85,10 @@ constexpr Eigen::Index kSparseDelassusRows = 96;
 /// from 10 % with the sticking step, whose sparse factor it feeds: kStickSparseDensity).
 constexpr double kSparseDelassusDensity = 0.25;
 
+// Islands (islands.hpp) of at least this many rows are solved alone; the smaller ones together, as
+// one problem. Measured (2026-12-07, load ~3.5 on 2 cores): every island alone made a grid of 256
+// lone cubes (1024 contacts) solve in 2x the whole problem's time (a driver and a verdict per
+// 12-row island, where one sticking step takes the grid); pile-24's heaps are 60-250 rows.
+constexpr Eigen::Index kIslandAloneRows = 64;
+
 }  // namespace stiction
