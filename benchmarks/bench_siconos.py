@@ -15,12 +15,14 @@ Measure: the relative natural-map residual of the De Saxce problem on the W as s
 for every solver's answer; "solved" means <= 1e-8 by that measure, whatever the solver claims.
 Time: the median over repeats (until 0.5 s are spent and at least 3 solves done, or 2 s; at most
 20,000 solves: ``ENOUGH``) of one solve call's wall time from Python, its Python wrapper included,
-on both sides alike (Siconos exposes no timer of its own): stiction's ``stiction.solve`` call in
-this process (each after an untimed solve of the problem with A and b scaled by 4, so that no
-factorization carries over from the previous solve of the same problem), Siconos' ``fc3d_driver``
-call in its helper process (``time.perf_counter`` around the call in both). stiction's own C++
-timer (``result.seconds``, the solve and its verdict without the wrapper) is reported beside it
-(tables before 2026-12-08 compared that C++ time with Siconos' wrapped call); at most ``--time-limit`` seconds per solve (Siconos:
+on both sides alike (Siconos exposes no timer of its own; ``time.perf_counter`` around the call in
+both): stiction's ``Solver("default").solve(problem, settings)`` binding call in this process, its
+settings built once as Siconos' options are built outside its timed call (``stiction.solve``'s
+argument checks add ~1 us more), each after an untimed solve of the problem with A and b scaled by
+4, so that no factorization carries over from the previous solve of the same problem; Siconos'
+``fc3d_driver(problem, r, u, options)`` call in its helper process. stiction's own C++ timer
+(``result.seconds``, the solve and its verdict without the binding) is reported beside it (tables
+before 2026-12-08 compared that C++ time with Siconos' wrapped call); at most ``--time-limit`` seconds per solve (Siconos:
 the helper process is stopped when a request takes 6 times that, at least 5 s). Problems of at
 most 64 rows are timed in 5 rounds, each stiction then every Siconos solver; the reported ratio is
 the median of the rounds' ratios. Settings: tolerance ``--tol`` for every solver, 10,000
@@ -60,19 +62,19 @@ def relative_residual(problem, lam, b) -> float:
     return float(_core.residual(problem, lam)) * (1.0 + nb) / nb if nb > 0 else float(_core.residual(problem, lam))
 
 
-def run_stiction(problem, decoy, tol, time_limit):
-    # the solve call's wall time from Python, its wrapper included, as Siconos' fc3d_driver call is
-    # timed in its helper (the wrapper's few microseconds matter on the 3-15-row problems); the C++
-    # timer (result.seconds) beside it. Before each timed solve, an untimed one of the decoy (the
+def run_stiction(solver, settings, problem, decoy):
+    # the solve call's wall time from Python, its binding included, as Siconos' fc3d_driver call is
+    # timed in its helper (the binding's ~1 us matters on the 3-15-row problems); the C++ timer
+    # (result.seconds) beside it. Before each timed solve, an untimed one of the decoy (the
     # same problem with A and b times 4): the default solver keeps its sticking step's factor from
     # one call to the next while A's diagonal stays (a simulation's next step), which on the same
     # problem solved again would time a cached factorization (the all-stick CubesH8 problems: 0.8 us
     # against 8 us) that Siconos does not keep
     times, cpp_times, wall, res = [], [], 0.0, None
     while True:
-        stiction.solve(decoy, tol=tol, max_iter=10000, time_limit=time_limit)
+        solver.solve(decoy, settings)
         t0 = time.perf_counter()
-        res = stiction.solve(problem, tol=tol, max_iter=10000, time_limit=time_limit)
+        res = solver.solve(problem, settings)
         times.append(time.perf_counter() - t0)
         wall += times[-1]
         cpp_times.append(res.seconds)
@@ -109,6 +111,8 @@ def main() -> int:
     if args.only:
         files = [f for f in files if any(f.name.startswith(o) for o in args.only)]
     rows = []
+    default_solver, settings = stiction.Solver("default"), stiction.SolverSettings()
+    settings.tolerance, settings.max_iterations, settings.time_limit = args.tol, 10000, args.time_limit
     with siconos.Server(python) as server:
         for path in files:
             P = fclib.load(path)
@@ -122,7 +126,7 @@ def main() -> int:
             per_round = {name: [] for name in ["stiction", *SOLVERS]}
             cpp_rounds = []
             for _ in range(rounds):
-                seconds, cpp_seconds, res = run_stiction(problem, decoy, args.tol, args.time_limit)
+                seconds, cpp_seconds, res = run_stiction(default_solver, settings, problem, decoy)
                 per_round["stiction"].append(seconds)
                 cpp_rounds.append(cpp_seconds)
                 row["stiction"] = {"residual": relative_residual(problem, np.asarray(res.lam), P.b),
@@ -174,8 +178,10 @@ def markdown(rows, tol) -> str:
         "`python benchmarks/bench_siconos.py`. Cell: median time / relative residual on the stored W "
         "(computed by stiction for every answer); **bold**: solved (<= 1e-8); ✗: the solver claimed "
         "convergence without it. Time: one solve call's wall time from Python, its wrapper included, on "
-        "both sides alike (`stiction.solve` in the bench's process, Siconos' `fc3d_driver` in its helper "
-        "process; Siconos has no timer of its own); stiction's C++ solve timer alone in parentheses. "
+        "both sides alike (Siconos has no timer of its own): stiction's `Solver.solve(problem, settings)` in "
+        "the bench's process, Siconos' `fc3d_driver(problem, r, u, options)` in its helper process, the "
+        "settings and options built outside the timed call; stiction's C++ solve timer alone in parentheses "
+        "(tables before 2026-12-08 compared that C++ time with Siconos' wrapped call). "
         "Ratio: stiction's time over the fastest solving Siconos solver's; for "
         f"problems of at most {SMALL_ROWS} rows the median of {ROUNDS} rounds, each timing both sides back "
         "to back (in parentheses: the rounds' range).",
