@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime
+import os
 import platform
 import shutil
 import statistics
@@ -110,7 +111,7 @@ def main() -> int:
     files = [Path(r["path"]) for r in fclib_problem_set()]  # every bundled FCLib problem, sorted
     if args.only:
         files = [f for f in files if any(f.name.startswith(o) for o in args.only)]
-    rows = []
+    rows, load_start = [], os.getloadavg()
     default_solver, settings = stiction.Solver("default"), stiction.SolverSettings()
     settings.tolerance, settings.max_iterations, settings.time_limit = args.tol, 10000, args.time_limit
     with siconos.Server(python) as server:
@@ -153,7 +154,7 @@ def main() -> int:
                 f"{v['residual'] if v['residual'] is not None else float('nan'):8.1e}"
                 for k, v in row.items() if isinstance(v, dict))
             print(f"{path.name[:44]:44s} {cells}", file=sys.stderr, flush=True)
-    text = markdown(rows, args.tol)
+    text = markdown(rows, args.tol, (load_start[0], os.getloadavg()[0]))
     if args.out:
         args.out.write_text(text)
     print(text)
@@ -169,12 +170,13 @@ def solved(v, tol=1e-8) -> bool:
     return v["residual"] is not None and v["residual"] <= tol
 
 
-def markdown(rows, tol) -> str:
+def markdown(rows, tol, load=None) -> str:
     cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")
     names = ["stiction"] + list(SOLVERS)
     lines = [
-        f"Measured {datetime.date.today()} on {platform.machine()} ({cpu}), stiction {stiction.__version__} "
-        f"(default solver) against Siconos 4.4 (Debian python3-siconos), tolerance {tol:g} for every solver; "
+        f"Measured {datetime.date.today()} on {platform.machine()} ({cpu}), "
+        + (f"load average {load[0]:.2f} at the start and {load[1]:.2f} at the end, " if load else "")
+        + f"stiction {stiction.__version__} (default solver) against Siconos 4.4 (Debian python3-siconos), tolerance {tol:g} for every solver; "
         "`python benchmarks/bench_siconos.py`. Cell: median time / relative residual on the stored W "
         "(computed by stiction for every answer); **bold**: solved (<= 1e-8); ✗: the solver claimed "
         "convergence without it. Time: one solve call's wall time from Python, its wrapper included, on "
