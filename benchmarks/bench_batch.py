@@ -16,13 +16,22 @@ the four configurations in an order rotated by one per repetition; the report gi
 wall time over repetitions (9, ``--quick`` 3), the throughput ratio median(1 thread) / median(2
 threads) for each simulator, and the paired ratios (1 thread / 2 threads within a repetition).
 The machine is shared: run it idle (``uptime``: load below 1) for the ratio to mean anything; the
-load average is printed at the start and the end.
+load average is printed at the start and the end, and with each run the involuntary context
+switches of this process (``preemptions``: another program took one of our cores meanwhile).
+Beside the wall clock, for stiction, the CPU time of the call (``time.process_time``: every thread)
+and of the calling thread alone (``time.thread_time``), both around ``batch_rollout`` (the
+Trajectories built after the C++ call included): with 2 threads the calling thread runs what is
+serial (layout, hand-over) and its share of the simulations, the other thread the rest, so
+``cpu_bound_ratio`` = CPU(1 thread) / max(calling thread, other thread) with 2 is about the
+throughput ratio the work allows when both cores are free, whatever the load (the wall ratio is
+not); a little below it, as the Trajectories' Python, serial, is counted in it but not in the wall.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import resource
 import statistics
 import time
 
@@ -31,11 +40,23 @@ import numpy as np
 from stiction.simulator import Simulator, batch_rollout
 
 
-def run_stiction(scene: str, sims: int, duration: float, threads: int) -> float:
-    batch = batch_rollout([Simulator(scene) for _ in range(sims)], duration, threads=threads)
+CPU: dict[str, list[tuple[float, float]]] = {}  # stiction runs: (process CPU, calling thread CPU) seconds
+PREEMPTIONS: dict[str, list[int]] = {}
+
+
+def run_stiction(scene: str, sims: int, duration: float, threads: int) -> tuple[float, int]:
+    """Wall seconds of the batch (Batch.seconds) and the preemptions meanwhile."""
+    simulators = [Simulator(scene) for _ in range(sims)]
+    before, cpu0, own0 = preemptions(), time.process_time(), time.thread_time()
+    batch = batch_rollout(simulators, duration, threads=threads)
+    CPU.setdefault(f"stiction {threads}", []).append((time.process_time() - cpu0, time.thread_time() - own0))
     if any(batch.errors):
         raise RuntimeError(f"a simulation failed: {batch.errors}")
-    return batch.seconds
+    return batch.seconds, preemptions() - before
+
+
+def preemptions() -> int:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_nivcsw
 
 
 class MujocoBatch:
@@ -55,13 +76,13 @@ class MujocoBatch:
         self.control = (np.tile(self.twin.ctrl, (sims, 1, 1)) if self.twin.model.nu else None)
         self.steps = steps
 
-    def run(self, threads: int) -> float:
+    def run(self, threads: int) -> tuple[float, int]:
         import mujoco.rollout
 
         data = self.datas[0] if threads == 1 else self.datas[:threads]
-        t0 = time.perf_counter()
+        before, t0 = preemptions(), time.perf_counter()
         mujoco.rollout.rollout(self.twin.model, data, self.initial, self.control, nstep=self.steps)
-        return time.perf_counter() - t0
+        return time.perf_counter() - t0, preemptions() - before
 
 
 def main() -> int:
@@ -89,11 +110,14 @@ def main() -> int:
     names = list(timers)
     for name in names:  # warm-up
         timers[name]()
+    CPU.clear()
     times = {name: [] for name in names}
     for r in range(reps):
         order = names[r % len(names):] + names[: r % len(names)]
         for name in order:
-            times[name].append(timers[name]())
+            seconds, preempted = timers[name]()
+            times[name].append(seconds)
+            PREEMPTIONS.setdefault(name, []).append(preempted)
     med = {name: statistics.median(v) for name, v in times.items()}
     out = {
         "scene": args.scene, "simulations": args.sims, "duration": args.duration, "steps": steps,
@@ -103,6 +127,12 @@ def main() -> int:
         "throughput_ratio": {}, "paired_ratios": {},
         "load_average_start": load_start, "load_average_end": os.getloadavg(), "cpus": os.cpu_count(),
     }
+    out["preemptions"] = PREEMPTIONS
+    one, many = CPU["stiction 1"], CPU[f"stiction {args.threads}"]
+    out["stiction_cpu_seconds"] = {name: statistics.median(c for c, _ in v) for name, v in CPU.items()}
+    out["stiction_calling_thread_cpu_seconds"] = {name: statistics.median(o for _, o in v) for name, v in CPU.items()}
+    out["cpu_bound_ratio"] = statistics.median(c for c, _ in one) / statistics.median(
+        max(own, c - own) for c, own in many)
     for sim in ("stiction", "mujoco"):
         one, many = f"{sim} 1", f"{sim} {args.threads}"
         if one in med:
