@@ -14,10 +14,15 @@ Measure: the relative natural-map residual of the De Saxce problem on the W as s
 (||lambda - P_K(lambda - (u + E s(u)))|| / ||q||, Siconos' own scaling), computed here by stiction
 for every solver's answer; "solved" means <= 1e-8 by that measure, whatever the solver claims.
 Time: the median over repeats (until 0.5 s are spent and at least 3 solves done, or 2 s; at most
-20,000 solves: ``ENOUGH``) of the solve's own time (stiction: ``result.seconds``, the C++ solve and
-its verdict, each after an untimed solve of the problem with A and b scaled by 4, so that no
-factorization carries over from the previous solve of the same problem; Siconos: its
-``fc3d_driver`` call timed in its process); at most ``--time-limit`` seconds per solve (Siconos:
+20,000 solves: ``ENOUGH``) of one solve call's wall time from Python, its Python wrapper included,
+on both sides alike (Siconos exposes no timer of its own; ``time.perf_counter`` around the call in
+both): stiction's ``Solver("default").solve(problem, settings)`` binding call in this process, its
+settings built once as Siconos' options are built outside its timed call (``stiction.solve``'s
+argument checks add ~1 us more), each after an untimed solve of the problem with A and b scaled by
+4, so that no factorization carries over from the previous solve of the same problem; Siconos'
+``fc3d_driver(problem, r, u, options)`` call in its helper process. stiction's own C++ timer
+(``result.seconds``, the solve and its verdict without the binding) is reported beside it (tables
+before 2026-12-08 compared that C++ time with Siconos' wrapped call); at most ``--time-limit`` seconds per solve (Siconos:
 the helper process is stopped when a request takes 6 times that, at least 5 s). Problems of at
 most 64 rows are timed in 5 rounds, each stiction then every Siconos solver; the reported ratio is
 the median of the rounds' ratios. Settings: tolerance ``--tol`` for every solver, 10,000
@@ -28,6 +33,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime
+import os
 import platform
 import shutil
 import statistics
@@ -57,23 +63,25 @@ def relative_residual(problem, lam, b) -> float:
     return float(_core.residual(problem, lam)) * (1.0 + nb) / nb if nb > 0 else float(_core.residual(problem, lam))
 
 
-def run_stiction(problem, decoy, tol, time_limit):
-    # the solve's own C++ time (result.seconds), as Siconos' is its driver call's: without the
-    # ~3 us of the Python wrapper, which matter on the 3-15-row Rover problems. Before each timed
-    # solve, an untimed one of the decoy (the same problem with A and b times 4): the default
-    # solver keeps its sticking step's factor from one call to the next while A's diagonal stays
-    # (a simulation's next step), which on the same problem solved again would time a cached
-    # factorization (the all-stick CubesH8 problems: 0.8 us against 8 us) that Siconos does not keep
-    times, wall, res = [], 0.0, None
+def run_stiction(solver, settings, problem, decoy):
+    # the solve call's wall time from Python, its binding included, as Siconos' fc3d_driver call is
+    # timed in its helper (the binding's ~1 us matters on the 3-15-row problems); the C++ timer
+    # (result.seconds) beside it. Before each timed solve, an untimed one of the decoy (the
+    # same problem with A and b times 4): the default solver keeps its sticking step's factor from
+    # one call to the next while A's diagonal stays (a simulation's next step), which on the same
+    # problem solved again would time a cached factorization (the all-stick CubesH8 problems: 0.8 us
+    # against 8 us) that Siconos does not keep
+    times, cpp_times, wall, res = [], [], 0.0, None
     while True:
-        stiction.solve(decoy, tol=tol, max_iter=10000, time_limit=time_limit)
+        solver.solve(decoy, settings)
         t0 = time.perf_counter()
-        res = stiction.solve(problem, tol=tol, max_iter=10000, time_limit=time_limit)
-        wall += time.perf_counter() - t0
-        times.append(res.seconds)
+        res = solver.solve(problem, settings)
+        times.append(time.perf_counter() - t0)
+        wall += times[-1]
+        cpp_times.append(res.seconds)
         if ENOUGH.enough(times, wall):
             break
-    return statistics.median(times), res
+    return statistics.median(times), statistics.median(cpp_times), res
 
 
 ROUNDS = 5  # rounds of timing for problems of at most SMALL_ROWS rows
@@ -103,7 +111,9 @@ def main() -> int:
     files = [Path(r["path"]) for r in fclib_problem_set()]  # every bundled FCLib problem, sorted
     if args.only:
         files = [f for f in files if any(f.name.startswith(o) for o in args.only)]
-    rows = []
+    rows, load_start = [], os.getloadavg()
+    default_solver, settings = stiction.Solver("default"), stiction.SolverSettings()
+    settings.tolerance, settings.max_iterations, settings.time_limit = args.tol, 10000, args.time_limit
     with siconos.Server(python) as server:
         for path in files:
             P = fclib.load(path)
@@ -115,9 +125,11 @@ def main() -> int:
             rounds = ROUNDS if 3 * P.contacts <= SMALL_ROWS else 1
             row = {"problem": path.name, "rows": 3 * P.contacts, "round_ratios": []}
             per_round = {name: [] for name in ["stiction", *SOLVERS]}
+            cpp_rounds = []
             for _ in range(rounds):
-                seconds, res = run_stiction(problem, decoy, args.tol, args.time_limit)
+                seconds, cpp_seconds, res = run_stiction(default_solver, settings, problem, decoy)
                 per_round["stiction"].append(seconds)
+                cpp_rounds.append(cpp_seconds)
                 row["stiction"] = {"residual": relative_residual(problem, np.asarray(res.lam), P.b),
                                    "claimed": bool(res.converged)}
                 for solver in SOLVERS:
@@ -135,13 +147,14 @@ def main() -> int:
             for name, times in per_round.items():
                 done = [t for t in times if t is not None]
                 row[name]["seconds"] = statistics.median(done) if len(done) == len(times) else None
+            row["stiction"]["cpp_seconds"] = statistics.median(cpp_rounds)
             rows.append(row)
             cells = "  ".join(
                 f"{k} {v['seconds'] * 1e3 if v['seconds'] is not None else float('nan'):9.2f} ms "
                 f"{v['residual'] if v['residual'] is not None else float('nan'):8.1e}"
                 for k, v in row.items() if isinstance(v, dict))
             print(f"{path.name[:44]:44s} {cells}", file=sys.stderr, flush=True)
-    text = markdown(rows, args.tol)
+    text = markdown(rows, args.tol, (load_start[0], os.getloadavg()[0]))
     if args.out:
         args.out.write_text(text)
     print(text)
@@ -157,15 +170,21 @@ def solved(v, tol=1e-8) -> bool:
     return v["residual"] is not None and v["residual"] <= tol
 
 
-def markdown(rows, tol) -> str:
+def markdown(rows, tol, load=None) -> str:
     cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")
     names = ["stiction"] + list(SOLVERS)
     lines = [
-        f"Measured {datetime.date.today()} on {platform.machine()} ({cpu}), stiction {stiction.__version__} "
-        f"(default solver) against Siconos 4.4 (Debian python3-siconos), tolerance {tol:g} for every solver; "
+        f"Measured {datetime.date.today()} on {platform.machine()} ({cpu}), "
+        + (f"load average {load[0]:.2f} at the start and {load[1]:.2f} at the end, " if load else "")
+        + f"stiction {stiction.__version__} (default solver) against Siconos 4.4 (Debian python3-siconos), tolerance {tol:g} for every solver; "
         "`python benchmarks/bench_siconos.py`. Cell: median time / relative residual on the stored W "
         "(computed by stiction for every answer); **bold**: solved (<= 1e-8); ✗: the solver claimed "
-        "convergence without it. Ratio: stiction's time over the fastest solving Siconos solver's; for "
+        "convergence without it. Time: one solve call's wall time from Python, its wrapper included, on "
+        "both sides alike (Siconos has no timer of its own): stiction's `Solver.solve(problem, settings)` in "
+        "the bench's process, Siconos' `fc3d_driver(problem, r, u, options)` in its helper process, the "
+        "settings and options built outside the timed call; stiction's C++ solve timer alone in parentheses "
+        "(tables before 2026-12-08 compared that C++ time with Siconos' wrapped call). "
+        "Ratio: stiction's time over the fastest solving Siconos solver's; for "
         f"problems of at most {SMALL_ROWS} rows the median of {ROUNDS} rounds, each timing both sides back "
         "to back (in parentheses: the rounds' range).",
         "",
@@ -181,6 +200,8 @@ def markdown(rows, tol) -> str:
                 cells.append(v.get("failure", "—"))
                 continue
             txt = f"{duration(v['seconds'])} / {v['residual']:.1e}"
+            if "cpp_seconds" in v:  # (stiction: its C++ timer, the wrapper left out)
+                txt = f"{duration(v['seconds'])} ({duration(v['cpp_seconds'])}) / {v['residual']:.1e}"
             if solved(v):
                 txt = f"**{txt}**"
             elif v["claimed"]:

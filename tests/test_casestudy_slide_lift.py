@@ -120,7 +120,7 @@ def test_cli_json(capsys):
     out = json.loads(capsys.readouterr().out)
     assert out["name"] == "slide-lift" and out["passed"] is True
     keys = {"formulation", "max_normal_velocity", "airborne_fraction", "lift_ratio_median",
-            "max_exact_law_residual", "own_converged_fraction", "us_per_step"}
+            "max_exact_law_residual", "own_converged_fraction", "us_per_step", "median_us_per_step"}
     assert all(keys <= set(p) for p in out["points"])
     rows = {p["formulation"]: p for p in out["points"]}
     assert len(rows) == len(out["points"])

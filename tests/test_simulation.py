@@ -347,6 +347,12 @@ def test_cli_simulate_json_and_errors(tmp_path):
                 "max_normal_velocity_while_sliding", "mean_acceleration_along_slope", "max_foot_slip"):
         assert key in s
     assert s["steps"] == 500 and s["scene"] == "cube-incline-slip"
+    # the rollout's wall time holds every step's timed interval: its mean per step is at least the timer's mean,
+    # and the timer's mean is its total / steps (the trajectory saved holds every step's timings)
+    saved = np.load(tmp_path / "t.npz")
+    assert s["us_per_step"] == pytest.approx(saved["timings"][1:, 4].sum() / 500, rel=1e-12)
+    assert s["median_us_per_step"] == pytest.approx(float(np.median(saved["timings"][1:, 4])), rel=1e-12)
+    assert s["wall_us_per_step"] >= s["us_per_step"] > 0
     assert (tmp_path / "t.npz").is_file()
     bad = subprocess.run([sys.executable, "-m", "stiction.cli", "simulate", "no-such-scene"],
                          capture_output=True, text=True)

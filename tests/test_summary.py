@@ -3,8 +3,8 @@ positions and velocities of the contact spheres and bodies from Pinocchio (forwa
 updateFramePlacements, getFrameVelocity), gaps from the half-spaces' geometry, the rest with numpy.
 
 The keys `Simulator.summary` emits (every one is covered here; test_every_key_is_covered lists them):
-scene, mode, formulation, dt, duration, steps, recorded_steps, contacts, max_body_drift, us_per_step, us_per_phase,
-max_penetration, max_residual, all_converged, unconverged_steps, first_unconverged_t, settle_time,
+scene, mode, formulation, dt, duration, steps, recorded_steps, contacts, max_body_drift, us_per_step, median_us_per_step,
+us_per_phase, median_us_per_phase, max_penetration, max_residual, all_converged, unconverged_steps, first_unconverged_t, settle_time,
 base_drift, max_normal_velocity_while_sliding, mean_acceleration_along_slope,
 expected_sliding_acceleration, max_foot_slip, max_foot_displacement, rows_per_contact, contact_rows,
 warnings; final_base_speed, final_base_sway and settled are covered by tests/test_standing.py.
@@ -23,7 +23,7 @@ from stiction.simulator import PENETRATION_WARNING, Simulator
 
 G = 9.81
 KEYS = {"scene", "mode", "formulation", "dt", "duration", "steps", "recorded_steps", "contacts", "max_body_drift", "us_per_step",
-        "us_per_phase", "max_penetration", "max_residual", "all_converged", "unconverged_steps",
+        "median_us_per_step", "us_per_phase", "median_us_per_phase", "max_penetration", "max_residual", "all_converged", "unconverged_steps",
         "first_unconverged_t", "settle_time", "base_drift", "max_normal_velocity_while_sliding",
         "mean_acceleration_along_slope", "expected_sliding_acceleration", "max_foot_slip", "max_foot_displacement",
         "rows_per_contact", "contact_rows", "warnings",
@@ -332,14 +332,32 @@ def test_max_normal_velocity_counts_only_slipping_contacts(dropped):
     assert s["max_normal_velocity_while_sliding"] < 0.1 * falling  # 0.044 m/s: the landing step's
 
 
-def test_timing_keys_are_the_medians_of_the_recorded_phases(dropped):
-    """us_per_step and us_per_phase: the median over the steps of each recorded phase time."""
+def test_timing_keys_mean_is_total_time_over_steps_and_median_beside_it(dropped):
+    """us_per_step: the C++ step timer's total over the rollout / the steps taken (every step is recorded);
+    us_per_phase likewise per phase; median_us_per_step and median_us_per_phase: the median step."""
     _, traj, s = dropped
     t = traj.timings[1:]
-    assert s["us_per_step"] == np.median(t[:, 4])
-    assert s["us_per_phase"] == {p: np.median(t[:, k]) for k, p in
-                                 enumerate(("kinematics", "delassus", "solve", "integrate"))}
-    assert s["us_per_step"] >= max(s["us_per_phase"].values())
+    assert s["steps"] == len(t) == 75  # 0.3 s at dt = 4 ms, every step recorded
+    assert s["us_per_step"] == pytest.approx(t[:, 4].sum() / s["steps"], rel=1e-12)
+    assert s["median_us_per_step"] == np.median(t[:, 4])
+    phases = ("kinematics", "delassus", "solve", "integrate")
+    assert s["us_per_phase"] == pytest.approx({p: t[:, k].sum() / s["steps"] for k, p in enumerate(phases)}, rel=1e-12)
+    assert s["median_us_per_phase"] == {p: np.median(t[:, k]) for k, p in enumerate(phases)}
+    # the phases are parts of the step: their means add up to at most the step's mean
+    assert sum(s["us_per_phase"].values()) <= s["us_per_step"] * (1 + 1e-12)
+
+
+def test_us_per_step_counts_slow_steps_in_full(dropped):
+    """A rollout whose steps take 1 us but one in ten takes 100 us costs 10.9 us a step (total / steps),
+    although its median step is 1 us: the summary says both (timings set by hand, the rest as simulated)."""
+    sim, traj, _ = dropped
+    timings = np.ones_like(traj.timings)
+    timings[1::10] = 100.0  # records 1, 11, ..., 71: 8 of the 75 steps
+    s = sim.summary(dataclasses.replace(traj, timings=timings))
+    assert s["us_per_step"] == pytest.approx((67 * 1.0 + 8 * 100.0) / 75, rel=1e-12)
+    assert s["median_us_per_step"] == 1.0
+    assert s["us_per_phase"]["solve"] == pytest.approx((67 + 800) / 75, rel=1e-12)
+    assert s["median_us_per_phase"]["solve"] == 1.0
 
 
 def test_convergence_keys_from_the_solver_results():

@@ -180,8 +180,11 @@ void rollout(const SimulatorModel& sim, SimulatorData& d, int n_steps, int every
 }
 
 void batchRollout(const std::vector<BatchItem>& items, int n_steps, int every, int threads,
-                  std::vector<Recording>& out) {
+                  std::vector<Recording>& out, const std::vector<double*>& storage) {
   checkCounts(n_steps, every);
+  if (!storage.empty() && storage.size() != items.size())
+    throw std::invalid_argument("batch rollout: " + std::to_string(storage.size()) + " storage blocks for " +
+                                std::to_string(items.size()) + " items");
   for (std::size_t i = 0; i < items.size(); ++i) {
     if (items[i].sim == nullptr || items[i].data == nullptr)
       throw std::invalid_argument("batch rollout: item " + std::to_string(i) + " has no model or data");
@@ -190,14 +193,17 @@ void batchRollout(const std::vector<BatchItem>& items, int n_steps, int every, i
         throw std::invalid_argument("batch rollout: items " + std::to_string(j) + " and " + std::to_string(i) +
                                     " share one SimulatorData (each simulation needs its own)");
   }
+  out.clear();  // (a recording laid out before would keep its block: every one is laid out anew below)
   out.resize(items.size());
-  for (std::size_t i = 0; i < items.size(); ++i) out[i].allocate(*items[i].sim, n_steps, every);
   if (threads <= 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   const int workers = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(threads), items.size()));
   std::atomic<std::size_t> next{0};
   auto work = [&]() {
     for (std::size_t i = next++; i < items.size(); i = next++) {
       try {
+        // laid out here, by the thread that writes it: the NaN fill faults its pages in on this
+        // thread's core, in parallel with the other threads' (doc of batchRollout)
+        out[i].allocate(*items[i].sim, n_steps, every, storage.empty() ? nullptr : storage[i]);
         run(*items[i].sim, *items[i].data, n_steps, every, out[i]);
       } catch (const std::exception& e) {
         out[i].error = e.what();
