@@ -30,6 +30,14 @@ class StepDerivatives:
     the one of the mode in ``modes`` (also set where the modes' equations have no exact solution or
     the step's velocity is not unique: docs/simulator.md, "Derivatives of a step").
     ``contact_names``: the μ columns' contacts.
+    ``mu_indeterminate``: per candidate contact, True where the contact belongs to a statically
+    indeterminate set (the kernel of the modes' equations touches its rows: a cube's four coplanar
+    corners). Its normal impulse is then not unique, and neither is its own μ column: it is the
+    derivative at the solver's split of the load (∂P_t/∂μ_i = P_n,i s, eq. 65's sliding rows), and
+    another equally valid split gives another column. Only their sum over the flagged contacts (a
+    μ shared by the set, e.g. a scene-wide μ) and the (q, v, τ) blocks are unique; compare and use
+    those (docs/derivatives.md). The finite-difference reference leaves it all False (it does not
+    see the kernel).
     """
 
     dq_dq: np.ndarray
@@ -43,6 +51,7 @@ class StepDerivatives:
     modes: tuple[str, ...] = ()
     boundary: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     contact_names: tuple[str, ...] = ()
+    mu_indeterminate: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def state_jacobian(self) -> np.ndarray:
         """The (2 nv, 2 nv) Jacobian of (q⁺, v⁺) with respect to (q, v), for chaining along a
@@ -392,6 +401,9 @@ def _from_core(out: dict, contact_names) -> StepDerivatives:
 
     boundary = np.array(out["boundary"], dtype=bool)
     boundary.setflags(write=False)
+    mu_indeterminate = np.array(out["mu_indeterminate"], dtype=bool)
+    mu_indeterminate.setflags(write=False)
     return StepDerivatives(
         **{k: frozen(out[k]) for k in ("dq_dq", "dq_dv", "dq_dtau", "dv_dq", "dv_dv", "dv_dtau", "dq_dmu", "dv_dmu")},
-        modes=tuple(out["modes"]), boundary=boundary, contact_names=tuple(contact_names))
+        modes=tuple(out["modes"]), boundary=boundary, contact_names=tuple(contact_names),
+        mu_indeterminate=mu_indeterminate)
