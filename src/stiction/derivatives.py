@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["StepDerivatives", "FiniteDifferenceReport", "finite_difference_step_derivatives",
-           "finite_difference_step_jvp", "candidate_mus"]
+           "finite_difference_step_jvp", "finite_difference_shared_mu_column", "candidate_mus"]
 
 
 @dataclass(frozen=True)
@@ -390,6 +390,36 @@ def finite_difference_step_jvp(sim, dq, dv, dtau=None, eps: float = 1e-6, *,
     q_plus0 = stepper.step(q0, v0, tau0)[0]
     dq_plus = (pin.difference(model, q_plus0, plus[0]) - pin.difference(model, q_plus0, minus[0])) / (2 * step)
     return dq_plus, (plus[1] - minus[1]) / (2 * step)
+
+
+def finite_difference_shared_mu_column(sim, candidates, eps: float = 1e-6, *,
+                                       tolerance: float = FD_TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
+    """(dq⁺/dμ, dv⁺/dμ) for one μ shared by the sphere contacts `candidates` (indices into
+    ``sim.contact_names``), by central differences: all their μ moved together in the same run. This is
+    the reference for the sum of the μ columns of a statically indeterminate set
+    (``StepDerivatives.mu_indeterminate``); the sum of the per-contact columns of
+    :func:`finite_difference_step_derivatives` is not, since each column comes from runs that pick
+    their own split of the load. Same steps and μ step (eps / (‖g‖ h)) as that function."""
+    import pinocchio as pin  # noqa: PLC0415
+
+    candidates = [int(i) for i in candidates]
+    if any(i < 0 or i >= len(sim.scene.contacts) for i in candidates):
+        raise ValueError(f"finite_difference_shared_mu_column: candidates must be sphere contacts "
+                         f"0..{len(sim.scene.contacts) - 1}, got {candidates}")
+    stepper = _ReferenceStepper(sim, tolerance, FD_MAX_ITERATIONS)
+    model = sim.scene.model
+    h = float(sim.model.settings.dt)
+    step = eps / (max(float(np.linalg.norm(model.gravity.linear)), 1.0) * h)
+    q0, v0, tau0 = np.array(sim.data.q), np.array(sim.data.v), stepper.control["tau_ff"]
+    q_plus0 = stepper.step(q0, v0, tau0)[0]
+    outs = []
+    for sign in (1.0, -1.0):
+        contacts = list(sim.scene.contacts)
+        for i in candidates:
+            contacts[i] = _copy_item(contacts[i], mu=float(contacts[i].mu) + sign * step)
+        qp, vp, _, _ = stepper.step(q0, v0, tau0, stepper._model(contacts, sim.scene.pairs))
+        outs.append((pin.difference(model, q_plus0, qp), vp))
+    return (outs[0][0] - outs[1][0]) / (2 * step), (outs[0][1] - outs[1][1]) / (2 * step)
 
 
 def _from_core(out: dict, contact_names) -> StepDerivatives:
