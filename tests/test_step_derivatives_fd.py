@@ -479,7 +479,7 @@ def test_analytic_derivatives_match_the_reference(label, capsys):
 def test_states_are_drawn_where_the_reference_is_sharp(label, capsys):
     """Each scene's draw gives mode-stable states (modes unchanged under every ±ε perturbation and the
     reference at ε, ε/3 and ε/10 within 1e-5), so that the comparison above has something to compare; the
-    reference's noise there is printed (over 100 states per scene: at most 6.6e-6, on the cube's μ
+    reference's noise there is printed (over 100 states per scene: at most 6.6e-6 between ε and ε/3, on the cube's per-corner μ
     columns, docs/derivatives.md)."""
     kinds = [(kind, noise) for _, _, kind, noise, _ in draw_states(label, 4)]
     stable = [max(noise.values()) for kind, noise in kinds if kind == "stable"]
