@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["StepDerivatives", "FiniteDifferenceReport", "finite_difference_step_derivatives",
-           "finite_difference_step_jvp", "candidate_mus"]
+           "finite_difference_step_jvp", "finite_difference_shared_mu_column", "candidate_mus"]
 
 
 @dataclass(frozen=True)
@@ -30,6 +30,14 @@ class StepDerivatives:
     the one of the mode in ``modes`` (also set where the modes' equations have no exact solution or
     the step's velocity is not unique: docs/simulator.md, "Derivatives of a step").
     ``contact_names``: the μ columns' contacts.
+    ``mu_indeterminate``: per candidate contact, True where the contact belongs to a statically
+    indeterminate set (the kernel of the modes' equations touches its rows: a cube's four coplanar
+    corners). Its normal impulse is then not unique, and neither is its own μ column: it is the
+    derivative at the solver's split of the load (∂P_t/∂μ_i = P_n,i s, eq. 65's sliding rows), and
+    another equally valid split gives another column. Only their sum over the flagged contacts (a
+    μ shared by the set, e.g. a scene-wide μ) and the (q, v, τ) blocks are unique; compare and use
+    those (docs/derivatives.md). The finite-difference reference leaves it all False (it does not
+    see the kernel).
     """
 
     dq_dq: np.ndarray
@@ -43,6 +51,7 @@ class StepDerivatives:
     modes: tuple[str, ...] = ()
     boundary: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     contact_names: tuple[str, ...] = ()
+    mu_indeterminate: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def state_jacobian(self) -> np.ndarray:
         """The (2 nv, 2 nv) Jacobian of (q⁺, v⁺) with respect to (q, v), for chaining along a
@@ -383,6 +392,36 @@ def finite_difference_step_jvp(sim, dq, dv, dtau=None, eps: float = 1e-6, *,
     return dq_plus, (plus[1] - minus[1]) / (2 * step)
 
 
+def finite_difference_shared_mu_column(sim, candidates, eps: float = 1e-6, *,
+                                       tolerance: float = FD_TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
+    """(dq⁺/dμ, dv⁺/dμ) for one μ shared by the sphere contacts `candidates` (indices into
+    ``sim.contact_names``), by central differences: all their μ moved together in the same run. This is
+    the reference for the sum of the μ columns of a statically indeterminate set
+    (``StepDerivatives.mu_indeterminate``); the sum of the per-contact columns of
+    :func:`finite_difference_step_derivatives` is not, since each column comes from runs that pick
+    their own split of the load. Same steps and μ step (eps / (‖g‖ h)) as that function."""
+    import pinocchio as pin  # noqa: PLC0415
+
+    candidates = [int(i) for i in candidates]
+    if any(i < 0 or i >= len(sim.scene.contacts) for i in candidates):
+        raise ValueError(f"finite_difference_shared_mu_column: candidates must be sphere contacts "
+                         f"0..{len(sim.scene.contacts) - 1}, got {candidates}")
+    stepper = _ReferenceStepper(sim, tolerance, FD_MAX_ITERATIONS)
+    model = sim.scene.model
+    h = float(sim.model.settings.dt)
+    step = eps / (max(float(np.linalg.norm(model.gravity.linear)), 1.0) * h)
+    q0, v0, tau0 = np.array(sim.data.q), np.array(sim.data.v), stepper.control["tau_ff"]
+    q_plus0 = stepper.step(q0, v0, tau0)[0]
+    outs = []
+    for sign in (1.0, -1.0):
+        contacts = list(sim.scene.contacts)
+        for i in candidates:
+            contacts[i] = _copy_item(contacts[i], mu=float(contacts[i].mu) + sign * step)
+        qp, vp, _, _ = stepper.step(q0, v0, tau0, stepper._model(contacts, sim.scene.pairs))
+        outs.append((pin.difference(model, q_plus0, qp), vp))
+    return (outs[0][0] - outs[1][0]) / (2 * step), (outs[0][1] - outs[1][1]) / (2 * step)
+
+
 def _from_core(out: dict, contact_names) -> StepDerivatives:
     """A StepDerivatives from ``_core.step_derivatives``'s dict (read-only arrays)."""
     def frozen(x):
@@ -392,6 +431,9 @@ def _from_core(out: dict, contact_names) -> StepDerivatives:
 
     boundary = np.array(out["boundary"], dtype=bool)
     boundary.setflags(write=False)
+    mu_indeterminate = np.array(out["mu_indeterminate"], dtype=bool)
+    mu_indeterminate.setflags(write=False)
     return StepDerivatives(
         **{k: frozen(out[k]) for k in ("dq_dq", "dq_dv", "dq_dtau", "dv_dq", "dv_dv", "dv_dtau", "dq_dmu", "dv_dmu")},
-        modes=tuple(out["modes"]), boundary=boundary, contact_names=tuple(contact_names))
+        modes=tuple(out["modes"]), boundary=boundary, contact_names=tuple(contact_names),
+        mu_indeterminate=mu_indeterminate)

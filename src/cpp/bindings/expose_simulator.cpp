@@ -358,14 +358,16 @@ bp::dict stepDerivativesPy(const bp::object& sim_, const bp::object& data_, cons
   out["has_q"] = d.has_q;
   out["q_next"] = d.q_next;
   out["v_next"] = d.v_next;
-  bp::list modes, boundary;
+  bp::list modes, boundary, mu_indeterminate;
   static const char* const kModes[] = {"none", "open", "stick", "slide"};
   for (std::size_t i = 0; i < d.modes.size(); ++i) {
     modes.append(kModes[d.modes[i] + 1]);
     boundary.append(static_cast<bool>(d.boundary[i]));
+    mu_indeterminate.append(static_cast<bool>(d.mu_indeterminate[i]));
   }
   out["modes"] = bp::tuple(modes);
   out["boundary"] = bp::tuple(boundary);
+  out["mu_indeterminate"] = bp::tuple(mu_indeterminate);
   return out;
 }
 

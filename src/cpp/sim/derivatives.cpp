@@ -326,6 +326,7 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
   // Modes at the converged P, u (scale-aware thresholds), and the mode equations' matrices.
   out.modes.assign(static_cast<std::size_t>(candidates), -1);
   out.boundary.assign(static_cast<std::size_t>(candidates), 0);
+  out.mu_indeterminate.assign(static_cast<std::size_t>(candidates), 0);
   const double p_scale = m > 0 ? P.lpNorm<Eigen::Infinity>() : 0.0;
   const double u_scale = m > 0 ? std::max(u.lpNorm<Eigen::Infinity>(), c.lpNorm<Eigen::Infinity>()) : 0.0;
   const double p_zero = 1e-8 * p_scale, u_zero = 1e-8 * u_scale;  // the solve's tolerance is ~1e-10
@@ -409,6 +410,17 @@ void stepDerivatives(const SimulatorModel& sim, const SimulatorData& sd, Simulat
       const Mat moved = MinvJt * kernel;
       const double tol = 1e-8 * MinvJt.norm();
       for (Eigen::Index z = 0; z < kernel.cols(); ++z) {
+        // Any kernel direction changes how the load is shared: the contacts it involves have a normal
+        // impulse, hence a mu column (E_mu = P_n s), that depends on the solver's split.
+        {
+          Eigen::Index row = 0;
+          for (int i : scratch.out.active) {
+            const int k = scratch.out.candidate_rows[i];
+            if (kernel.col(z).segment(row, k).norm() > 1e-8 * kernel.col(z).norm())
+              out.mu_indeterminate[static_cast<std::size_t>(i)] = 1;
+            row += k;
+          }
+        }
         if (moved.col(z).norm() <= tol * kernel.col(z).norm()) continue;
         out.indeterminate = true;
         Eigen::Index row = 0;

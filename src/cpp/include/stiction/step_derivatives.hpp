@@ -26,6 +26,10 @@ struct StepDerivativesOutput {
   /// Per candidate: -1 not in the problem, 0 open, 1 stick, 2 slide (the mode differentiated).
   std::vector<int> modes;
   std::vector<char> boundary;  ///< per candidate: on a mode boundary (a one-sided derivative)
+  /// Per candidate: in a statically indeterminate set (the kernel of the modes' equations touches its
+  /// rows: a cube's four coplanar corners), so its normal impulse, hence its own mu column, depends on
+  /// the solver's split of the load; the sum of the set's mu columns (a set-wide mu) does not.
+  std::vector<char> mu_indeterminate;
   /// The modes' equations had no exact solution (redundant contacts at a change of mode): every
   /// contact in contact flagged in `boundary`, the least-squares answer returned.
   bool inconsistent = false;
