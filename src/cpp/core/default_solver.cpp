@@ -183,13 +183,20 @@ class DefaultSolver::Cascade {
     }
   }
   // Each stage's cost goes into result.stages.
+  // (into the strings of the last solve's reports: no allocation once they have grown)
   template <typename Outcome>
   void record(const char* name, int iterations, Clock::time_point t0, const Outcome& outcome) {
-    result_.stages.push_back({name, iterations, secondsSince(t0), outcome});  // (a literal: one string made)
+    addStage(result_.stages, name, iterations, secondsSince(t0), outcome);
+  }
+  // (a literal is copied into the message's buffer: no string made)
+  bool finish(const char* how) {
+    result_.iterations = used_;
+    result_.message.assign(how);
+    return true;
   }
   bool finish(const std::string& how) {
     result_.iterations = used_;
-    result_.message = how;
+    result_.message.assign(how);
     return true;
   }
   // A stage found lambda where the tolerance cannot be verified in double precision: no other

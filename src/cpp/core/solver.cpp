@@ -88,6 +88,47 @@ void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen:
   }
 }
 
+namespace {
+// Reports cleared by clearStages, their strings' buffers kept (per thread, as the solvers' workspaces).
+constexpr std::size_t kStagePoolSize = 32;
+thread_local std::vector<StageReport> stage_pool;
+
+StageReport& pushStage(std::vector<StageReport>& stages) {
+  if (stage_pool.empty()) {
+    stages.emplace_back();
+  } else {
+    stages.push_back(std::move(stage_pool.back()));
+    stage_pool.pop_back();
+  }
+  return stages.back();
+}
+}  // namespace
+
+void clearStages(std::vector<StageReport>& stages) {
+  if (stage_pool.capacity() < kStagePoolSize) stage_pool.reserve(kStagePoolSize);
+  for (StageReport& r : stages)
+    if (stage_pool.size() < kStagePoolSize) stage_pool.push_back(std::move(r));
+  stages.clear();
+}
+
+void addStage(std::vector<StageReport>& stages, const char* name, int iterations, double seconds,
+              const char* outcome) {
+  StageReport& r = pushStage(stages);
+  r.name.assign(name);
+  r.iterations = iterations;
+  r.seconds = seconds;
+  r.outcome.assign(outcome);
+}
+
+void addStage(std::vector<StageReport>& stages, const char* name, int iterations, double seconds,
+              const std::string& outcome) {
+  StageReport& r = pushStage(stages);
+  r.name.assign(name);
+  r.iterations = iterations;
+  r.seconds = seconds;
+  r.outcome.assign(outcome);
+}
+
 std::unique_ptr<ContactSolver> makeSolver(const std::string& name) {
   if (name == "nsgs") return std::make_unique<NsgsSolver>();
   if (name == "admm") return std::make_unique<AdmmSolver>();
@@ -303,7 +344,7 @@ void solve(const ContactProblem& original, ContactSolver& solver, const SolverSe
   result.warm_start_seconds = 0.0;
   result.warm_start_iterations = 0;
   result.iterations = 0;
-  result.stages.clear();
+  clearStages(result.stages);
   result.divergence_candidates.clear();
   result.implicated_blocks.clear();
   result.min_solution_norm = 0.0;
@@ -348,8 +389,8 @@ void solve(const ContactProblem& original, ContactSolver& solver, const SolverSe
     const std::size_t stages_before = result.stages.size();
     solver.iterate(problem, local, result);
     if (result.stages.size() == stages_before)  // a single-stage algorithm: report it as one
-      result.stages.push_back({solver.name(), result.iterations,
-                               std::chrono::duration<double>(Clock::now() - t0).count(), result.message});
+      addStage(result.stages, solver.name().c_str(), result.iterations,
+               std::chrono::duration<double>(Clock::now() - t0).count(), result.message);
   } else {
     result.message = "no algorithm run";
   }

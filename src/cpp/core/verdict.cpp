@@ -3,6 +3,7 @@
 #include <type_traits>
 
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "stiction/compensated.hpp"
@@ -263,6 +264,13 @@ struct VerdictCache {
   VerdictMeasures out;
 };
 thread_local VerdictCache last_verdict;
+
+// The cached lambda is this one, bit for bit (one memcmp where Eigen's == compares entry by entry; a
+// -0 against a 0 only misses the cache, and a NaN's own bits give its own measures).
+bool sameLambda(const Eigen::VectorXd& cached, const Eigen::Ref<const Eigen::VectorXd>& lam) {
+  return cached.size() == lam.size() &&
+         std::memcmp(cached.data(), lam.data(), static_cast<std::size_t>(lam.size()) * sizeof(double)) == 0;
+}
 }  // namespace
 
 void forgetVerdicts() { last_verdict.problem = nullptr; }
@@ -270,7 +278,7 @@ void forgetVerdicts() { last_verdict.problem = nullptr; }
 bool lastVerdictResidual(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
                          Eigen::VectorXd& u) {
   const VerdictCache& cache = last_verdict;
-  if (cache.problem != &problem || cache.lam.size() != lam.size() || cache.u.size() != lam.size() || cache.lam != lam)
+  if (cache.problem != &problem || cache.lam.size() != lam.size() || cache.u.size() != lam.size() || !sameLambda(cache.lam, lam))
     return false;
   u = cache.u;
   return true;
@@ -280,8 +288,7 @@ void measureVerdict(const ContactProblem& problem, const Eigen::Ref<const Eigen:
                     VerdictMeasures& out, double decisive, bool per_block, const Eigen::VectorXd* fresh_u,
                     const Eigen::VectorXd* fresh_abs) {
   VerdictCache& cache = last_verdict;
-  if (!per_block && cache.problem == &problem && cache.decisive == decisive && cache.lam.size() == lam.size() &&
-      cache.lam == lam) {
+  if (!per_block && cache.problem == &problem && cache.decisive == decisive && sameLambda(cache.lam, lam)) {
     out.natural_map = cache.out.natural_map;
     out.bound = cache.out.bound;
     out.floor = cache.out.floor;

@@ -130,6 +130,15 @@ void validateSettings(const SolverSettings& settings);
 void solve(const ContactProblem& problem, ContactSolver& solver, const SolverSettings& settings,
            SolverResult& result, const Eigen::VectorXd* guess = nullptr);
 
+/// result.stages emptied, its reports' strings kept for addStage to reuse (a solve per simulator
+/// step: no allocation once they have grown).
+void clearStages(std::vector<StageReport>& stages);
+/// Appends {name, iterations, seconds, outcome} to `stages`, in strings clearStages kept.
+void addStage(std::vector<StageReport>& stages, const char* name, int iterations, double seconds,
+              const char* outcome);
+void addStage(std::vector<StageReport>& stages, const char* name, int iterations, double seconds,
+              const std::string& outcome);
+
 /// Classify every block from (lambda, u): open / stick / slip / closed.
 void classifyStates(const ContactProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& lam,
                     const Eigen::Ref<const Eigen::VectorXd>& u, std::vector<ContactState>& states);
