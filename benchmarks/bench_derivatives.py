@@ -2,8 +2,10 @@
 
 For each scene, in one process, repetitions interleaved (step, derivatives, FD, step, ...), medians:
 - one step: the C++ step timer (``data.timings["total"]``) and the wall time of ``_core.step`` (the scene's
-  settings, warm start on as in a rollout; the state is restored before every step);
-- ``sim.step_derivatives(wrt_q=True)`` and ``(wrt_q=False)`` (wall);
+  settings, warm start on as in a rollout; the state is restored before every step), the mean of 20 steps
+  back to back per repetition (a lone step after other work is 2-5x slower: cold caches);
+- ``sim.step_derivatives(wrt_q=True)`` and ``(wrt_q=False)`` (wall, the mean of 3 calls back to back; each
+  call runs the step itself first, on its scratch data);
 - central finite differences over (q, v, τ), the cheapest honest way: 2·3·nv steps of a Simulator with the
   warm start off (a direction's answer must not depend on the previous direction's impulses), each one
   ``data.q, data.v, data.tau_ff = ...; _core.step(...)``; the wall time of the whole loop and the sum of the
@@ -14,7 +16,8 @@ Accuracy: per block (dq/dq, dq/dv, dq/dτ, dv/dq, dv/dv, dv/dτ) max |A − B| /
 derivatives against each finite difference. A scene whose step_derivatives refuses is reported as refused
 with the message. The state is the scene's after ``--settle`` seconds of its rollout (controller on).
 
-    python benchmarks/bench_derivatives.py [--scenes solo12-stand ...] [--repeats 21] [--out table.json]
+    python benchmarks/bench_derivatives.py [--scenes solo12-stand talos-stand@joint_friction=false ...]
+        [--repeats 21] [--out table.json]
 """
 from __future__ import annotations
 
@@ -27,18 +30,32 @@ from pathlib import Path
 
 import numpy as np
 
-SCENES = ("solo12-stand", "solo12-slope-slip", "ur5-push-wall", "talos-stand")
+# talos-stand has joint dry friction rows, which step_derivatives refuses: also measured without them
+SCENES = ("solo12-stand", "solo12-slope-slip", "ur5-push-wall", "talos-stand", "talos-stand@joint_friction=false,joint_limits=false,effort_limits=false")
 BLOCKS = ("dq_dq", "dq_dv", "dq_dtau", "dv_dq", "dv_dv", "dv_dtau")
 EPS = 1e-6
+STEP_CALLS, DERIVATIVE_CALLS = 20, 3  # calls back to back per repetition (hot caches for both)
 # the issue's goals: Solo-12's derivatives <= 5 steps; TALOS's <= 95 us
 GOAL_RATIO_SOLO = 5.0
 GOAL_US_TALOS = 95.0
 
 
-def _settled(scene: str, settle: float | None):
+def parse_scene(spec: str) -> tuple[str, dict]:
+    """"talos-stand@joint_friction=false,effort_limits=false" -> the scene and its boolean overrides."""
+    name, _, rest = spec.partition("@")
+    overrides = {}
+    for item in filter(None, rest.split(",")):
+        key, eq, value = item.partition("=")
+        if not eq or value.lower() not in ("true", "false"):
+            raise ValueError(f"scene override must be key=true or key=false, got {item!r} in {spec!r}")
+        overrides[key] = value.lower() == "true"
+    return name, overrides
+
+
+def _settled(scene: str, settle: float | None, overrides: dict):
     from stiction.simulator import Simulator  # noqa: PLC0415
 
-    sim = Simulator(scene)
+    sim = Simulator(scene, **overrides)
     duration = sim.scene.settle_time if settle is None else settle
     if duration > 0:
         sim.rollout(duration)
@@ -48,12 +65,12 @@ def _settled(scene: str, settle: float | None):
 class _Case:
     """One scene's state and the three ways to differentiate its step."""
 
-    def __init__(self, scene: str, settle: float | None):
+    def __init__(self, scene: str, settle: float | None, overrides: dict):
         import pinocchio as pin  # noqa: PLC0415
 
         from stiction.simulator import Simulator  # noqa: PLC0415
 
-        self.sim = _settled(scene, settle)
+        self.sim = _settled(scene, settle, overrides)
         self.sim.controller = None  # the step and its derivatives use the data's control as it is
         self.pin_model = self.sim.scene.model
         d = self.sim.data
@@ -62,7 +79,7 @@ class _Case:
         self.nv = self.pin_model.nv
         self.h = float(self.sim.dt)
         # the FD simulator: same scene, warm start off, same control
-        self.fd = Simulator(scene, warm_start=False)
+        self.fd = Simulator(scene, warm_start=False, **overrides)
         self.fd.controller = None
         for k, x in self.control.items():
             setattr(self.fd.data, k, x)
@@ -91,24 +108,29 @@ class _Case:
         d = self.sim.data
         d.q, d.v, d.t = self.q0, self.v0, self.t0
 
-    def time_step(self):
+    def time_step(self, calls: int = STEP_CALLS):
+        """Mean wall and C++ timer (us) of `calls` steps back to back, each from the restored state: a lone
+        step after other work ran 10-30 us on Solo-12 against 5.5 us in a loop (cold caches)."""
         from stiction import _core  # noqa: PLC0415
 
+        d, model = self.sim.data, self.sim.model
+        wall = cpp = 0.0
+        for _ in range(calls):
+            d.q, d.v, d.t = self.q0, self.v0, self.t0
+            t0 = time.perf_counter()
+            _core.step(model, d)
+            wall += time.perf_counter() - t0
+            cpp += d.timings["total"]
         self.restore()
-        d = self.sim.data
-        t0 = time.perf_counter()
-        _core.step(self.sim.model, d)
-        wall = time.perf_counter() - t0
-        cpp = float(d.timings["total"])
-        self.q_plus0 = np.array(d.q)
-        self.restore()
-        return wall * 1e6, cpp
+        return wall * 1e6 / calls, cpp / calls
 
-    def time_derivatives(self, wrt_q: bool):
+    def time_derivatives(self, wrt_q: bool, calls: int = DERIVATIVE_CALLS):
+        """Mean wall time (us) of `calls` step_derivatives back to back (hot, as the steps), and the last."""
         self.restore()
         t0 = time.perf_counter()
-        out = self.sim.step_derivatives(wrt_q=wrt_q)
-        return (time.perf_counter() - t0) * 1e6, out
+        for _ in range(calls):
+            out = self.sim.step_derivatives(wrt_q=wrt_q)
+        return (time.perf_counter() - t0) * 1e6 / calls, out
 
     def finite_differences(self):
         """(wall us, sum of the C++ step timers us, StepDerivatives-like dict) of 6 nv steps."""
@@ -164,7 +186,8 @@ def _relative_errors(analytic, reference) -> dict[str, float]:
 
 
 def measure(scene: str, repeats: int, reference_repeats: int, settle: float | None) -> dict:
-    case = _Case(scene, settle)
+    name, overrides = parse_scene(scene)
+    case = _Case(name, settle, overrides)
     row: dict = {"scene": scene, "nv": case.nv, "contacts_in_step": None, "fd_steps": len(case.inputs)}
     refused = None
     try:
