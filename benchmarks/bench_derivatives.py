@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 # talos-stand has joint dry friction rows, which step_derivatives refuses: also measured without them
-SCENES = ("solo12-stand", "solo12-slope-slip", "ur5-push-wall", "talos-stand", "talos-stand@joint_friction=false,joint_limits=false,effort_limits=false")
+SCENES = ("solo12-stand", "solo12-slope-slip", "ur5-push-wall", "talos-stand",
+          "talos-stand@joint_friction=false,joint_limits=false,effort_limits=false")
 BLOCKS = ("dq_dq", "dq_dv", "dq_dtau", "dv_dq", "dv_dv", "dv_dtau")
 EPS = 1e-6
 STEP_CALLS, DERIVATIVE_CALLS = 20, 3  # calls back to back per repetition (hot caches for both)
@@ -102,7 +103,6 @@ class _Case:
                 tau = self.control["tau_ff"].copy()
                 tau[k] += s * self.tau_steps[k]
                 self.inputs.append((self.q0, self.v0, tau))
-        self.q_plus0 = None
 
     def restore(self):
         d = self.sim.data
@@ -252,7 +252,8 @@ def markdown(rows: list[dict], meta: dict) -> str:
     for r in rows:
         if r["refused"]:
             lines.append(f"| {r['scene']} | {r['nv']} | {_fmt(r['step_us_cpp'])} | {_fmt(r['step_us_wall'])} | "
-                         f"refused: {r['refused']} | — | — | {_fmt(r['fd_us_wall'], 0)} | {_fmt(r['fd_us_steps'], 0)} "
+                         f"refused: {r['refused']} | — | — | {_fmt(r['fd_us_wall'], 0)} | "
+                         f"{_fmt(r['fd_us_steps'], 0)} "
                          f"| — | {_fmt(r['reference_fd_us'], 0)} |")
             continue
         lines.append(f"| {r['scene']} | {r['nv']} | {_fmt(r['step_us_cpp'])} | {_fmt(r['step_us_wall'])} | "
