@@ -90,5 +90,11 @@ constexpr double kSparseDelassusDensity = 0.25;
 // lone cubes (1024 contacts) solve in 2x the whole problem's time (a driver and a verdict per
 // 12-row island, where one sticking step takes the grid); pile-24's heaps are 60-250 rows.
 constexpr Eigen::Index kIslandAloneRows = 64;
+/// The small islands go together into groups of at most this many rows (filled in island order):
+/// each group then stays in the default's medium class (<= kAdmmAboveRows: NSGS, then dense or
+/// sparse Newton), where one group of all of pile-1000's (4458 rows, 50.7k entries) fell in the
+/// large sparse class past kSparseNewtonEntries, and ADMM missed the tolerance at every step from
+/// step 266 (2026-12-08).
+constexpr Eigen::Index kIslandGroupRows = kAdmmAboveRows;
 
 }  // namespace stiction
