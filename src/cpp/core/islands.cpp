@@ -218,6 +218,16 @@ bool IslandSolver::solve(const ContactProblem& problem, const SolverSettings& se
     SolverResult& r = results_[n];
     stiction::solve(*isl.problem, *solvers_[n], sub_settings, r, given ? &sub_guess_ : nullptr);
     iterations += r.iterations;
+    if (!r.converged && given && r.status == SolveStatus::kNotConverged) {
+      // The previous step's impulses can lead an island into a stall that the same island from
+      // zero does not meet (the whole problem's retry, sim/solve.cpp): one cold solve of this
+      // island before the whole problem (pile-1000, step 265: a group missed from its guess and
+      // the whole problem, 4410 rows past sparse Newton's size, missed by ADMM at 1.9e-6).
+      SolverSettings cold = sub_settings;
+      cold.warm_start = WarmStart::kNone;
+      stiction::solve(*isl.problem, *solvers_[n], cold, r, nullptr);
+      iterations += r.iterations;
+    }
     if (!r.converged) return false;  // (the whole problem's solve says why)
     for (const StageReport& s : r.stages) stages_.push_back(s);
     for (std::size_t i = 0; i < isl.rows.size(); ++i) assembled_[isl.rows[i]] = r.lam[static_cast<Eigen::Index>(i)];
