@@ -319,10 +319,15 @@ class DefaultSolver::Cascade {
   }
 
   // Medium problems, and large dense ones: NSGS while it makes progress (a sweep costs one
-  // product with A), until its rate or its deceleration says it stalls.
+  // product with A), until its rate or its deceleration says it stalls, or its rate says it would
+  // finish past the budget (the simulator's 200 iterations): then the next stage gets what is
+  // left. Measured on pile-256's step 159 (342 rows, 100 islands of <= 2 contacts, one a hull on
+  // an edge whose two normal rows correlate at 0.973): NSGS improved all along, needed ~306
+  // sweeps and stopped at the budget at 4.5e-9; handed over at its first rate, Newton converges.
   bool nsgs() {
     const auto t0 = Clock::now();
-    const int sweeps = s_.nsgs_.sweep(problem_, lam_, budget_, tol_, switch_after_, remaining(), msg_);
+    const int sweeps = s_.nsgs_.sweep(problem_, lam_, budget_, tol_, switch_after_, remaining(),
+                                      msg_, std::max(1, budget_ - used_));
     used_ += sweeps;
     record("nsgs", sweeps, t0, msg_);
     if (msg_ != "stalled") return finish(msg_ == "converged" ? msg_ : msg_ + " (nsgs)");

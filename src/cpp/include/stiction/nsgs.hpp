@@ -22,10 +22,11 @@ class NsgsSolver final : public ContactSolver {
   /// `tolerance`, or (if switch_after > 0) until the convergence rate of the last
   /// 10 sweeps predicts more than `switch_after` further sweeps to reach the
   /// tolerance, or the predicted finishing sweep has moved 1.5x later than its earliest
-  /// value (a decelerating rate) (message "stalled": time for another method). Returns
-  /// the sweeps done.
+  /// value (a decelerating rate), or (if finish_by > 0) the predicted finishing sweep
+  /// (sweeps done + still needed) is past `finish_by`: the caller's budget will not suffice
+  /// (message "stalled": time for another method). Returns the sweeps done.
   int sweep(const ContactProblem& problem, Eigen::VectorXd& lam, int max_sweeps, double tolerance,
-            double switch_after, double time_limit, std::string& message);
+            double switch_after, double time_limit, std::string& message, int finish_by = 0);
 
  private:
   void prepare(const ContactProblem& problem);

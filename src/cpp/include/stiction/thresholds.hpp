@@ -32,8 +32,10 @@ constexpr Eigen::Index kAdmmAboveRows = 384;
 constexpr double kSparseProblemDensity = 0.1;
 /// A large sparse problem whose A stores at most this many entries tries sparse Newton from the
 /// guess before ADMM: Capsules (8.6-12.4k entries) 8-30 ms against ADMM's 18-42; KaplasTower
-/// (117k) 255 ms against ADMM's 81 (its LU fills in).
-constexpr Eigen::Index kSparseNewtonEntries = 50000;
+/// (117k) 255 ms against ADMM's 81 (its LU fills in). Raised from 50k (2026-12-08): pile-1000's
+/// largest island (2124 rows, past 50k entries) got ADMM alone, which spent the simulator's 200
+/// iterations at 3e-6 on steps 508-526, where sparse Newton converges (the step in 89 ms).
+constexpr Eigen::Index kSparseNewtonEntries = 100000;
 
 // ---- dense or sparse factorizations of A + shift I (ADMM, the sticking step) and of Newton's
 //      Jacobian
@@ -90,5 +92,11 @@ constexpr double kSparseDelassusDensity = 0.25;
 // lone cubes (1024 contacts) solve in 2x the whole problem's time (a driver and a verdict per
 // 12-row island, where one sticking step takes the grid); pile-24's heaps are 60-250 rows.
 constexpr Eigen::Index kIslandAloneRows = 64;
+/// The small islands go together into groups of at most this many rows (filled in island order):
+/// each group then stays in the default's medium class (<= kAdmmAboveRows: NSGS, then dense or
+/// sparse Newton), where one group of all of pile-1000's (4458 rows, 50.7k entries) fell in the
+/// large sparse class past kSparseNewtonEntries, and ADMM missed the tolerance at every step from
+/// step 266 (2026-12-08).
+constexpr Eigen::Index kIslandGroupRows = kAdmmAboveRows;
 
 }  // namespace stiction
